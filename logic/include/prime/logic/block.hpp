@@ -1,0 +1,57 @@
+#pragma once
+
+#include <concepts>
+#include <functional>
+#include <type_traits>
+
+namespace prime {
+
+// A block is any callable Out(In): a function, a lambda, a functor. It knows
+// nothing of Prime and can be tested on its own.
+template <class F, class In>
+concept Block = std::invocable<const F&, In> &&
+                !std::is_void_v<std::invoke_result_t<const F&, In>>;
+
+template <class F, class In>
+using block_output_t = std::remove_cvref_t<std::invoke_result_t<const F&, In>>;
+
+namespace detail {
+
+template <class Signature>
+struct signature_input {};
+template <class R, class A>
+struct signature_input<R(A)> {
+  using type = std::remove_cvref_t<A>;
+};
+
+template <class F>
+struct callable_input : callable_input<decltype(&F::operator())> {};
+template <class R, class A>
+struct callable_input<R (*)(A)> : signature_input<R(A)> {};
+template <class R, class A>
+struct callable_input<R (*)(A) noexcept> : signature_input<R(A)> {};
+template <class R, class A>
+struct callable_input<R(A)> : signature_input<R(A)> {};
+template <class R, class A>
+struct callable_input<R(A) noexcept> : signature_input<R(A)> {};
+template <class C, class R, class A>
+struct callable_input<R (C::*)(A) const> : signature_input<R(A)> {};
+template <class C, class R, class A>
+struct callable_input<R (C::*)(A) const noexcept> : signature_input<R(A)> {};
+template <class C, class R, class A>
+struct callable_input<R (C::*)(A)> : signature_input<R(A)> {};
+template <class C, class R, class A>
+struct callable_input<R (C::*)(A) noexcept> : signature_input<R(A)> {};
+
+}  // namespace detail
+
+// The input type of a block with exactly one, non-template call signature.
+// Generic lambdas and overloaded functors have none: name the input explicitly
+// (`core.chain<Scan>(f)`).
+template <class F>
+using block_input_t = typename detail::callable_input<std::remove_cvref_t<F>>::type;
+
+template <class F>
+concept DeducibleBlock = requires { typename block_input_t<F>; };
+
+}  // namespace prime

@@ -1,0 +1,44 @@
+#pragma once
+
+#include <string>
+#include <utility>
+
+#include "prime/logic/block.hpp"
+#include "prime/topology/concepts.hpp"
+#include "prime/topology/graph.hpp"
+#include "prime/topology/runtime.hpp"
+#include "prime/radiant/chain.hpp"
+
+namespace prime::radiant {
+
+// Compile-time fusion: a chain's type is its blocks, so linked chains inline
+// into one function.
+class Core : public Runtime {
+ public:
+  Core() : Runtime{"radiant"} {}
+
+  // A chain of one block (or of a chain of another medium, adopted whole).
+  template <class In = prime::detail::Deduce, class F>
+  [[nodiscard]] auto chain(F block, Graph graph) {
+    using I = chain_input_t<In, F>;
+    static_assert(Block<F, I>, "prime::radiant: a block must be callable as Out(In) and return a value");
+    return Chain<I, F>{std::move(block), std::move(graph)};
+  }
+  template <class In = prime::detail::Deduce, class F>
+  [[nodiscard]] auto chain(F block, std::string name) {
+    return chain<In>(std::move(block), Graph::node(std::move(name), "chain", "radiant"));
+  }
+  template <class In = prime::detail::Deduce, class F>
+  [[nodiscard]] auto chain(F block) {
+    if constexpr (prime::Chain<F>) {
+      Graph graph = block.graph();
+      return chain<In>(std::move(block), std::move(graph));
+    } else {
+      return chain<In>(std::move(block), std::string{"chain"});
+    }
+  }
+};
+
+static_assert(Medium<Core>);
+
+}  // namespace prime::radiant

@@ -1,0 +1,16 @@
+#pragma once
+
+// The topology layer: what chains and sources are, and the combinators that
+// work the same over every medium.
+#include "prime/topology/collector.hpp"
+#include "prime/topology/concepts.hpp"
+#include "prime/topology/foreach.hpp"
+#include "prime/topology/fork.hpp"
+#include "prime/topology/graph.hpp"
+#include "prime/topology/if_then_else.hpp"
+#include "prime/topology/link.hpp"
+#include "prime/topology/local_source.hpp"
+#include "prime/topology/qos.hpp"
+#include "prime/topology/repeat.hpp"
+#include "prime/topology/runtime.hpp"
+#include "prime/topology/sync.hpp"

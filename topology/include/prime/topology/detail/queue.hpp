@@ -1,0 +1,119 @@
+#pragma once
+
+#include <cassert>
+#include <condition_variable>
+#include <cstdint>
+#include <expected>
+#include <mutex>
+#include <optional>
+#include <stop_token>
+#include <vector>
+
+#include "prime/logic/error.hpp"
+#include "prime/logic/sample.hpp"
+#include "prime/topology/qos.hpp"
+
+namespace prime::detail {
+
+// One reader's bounded buffer: a ring of `capacity` slots that never grows.
+// Many writers (every producer of the source), one reader.
+//
+// Thread-safe. Writers and the reader only touch the condition variables when
+// the other side is known to be waiting, so a steady stream costs one
+// uncontended lock per value on each side.
+template <class T>
+class Queue {
+ public:
+  enum class Pushed { delivered, dropped_oldest, timed_out, stopped, closed };
+
+  explicit Queue(const Qos& qos)
+      : slots_(qos.capacity), overflow_{qos.overflow}, block_timeout_{qos.block_timeout} {
+    assert(qos.capacity > 0);
+  }
+
+  Pushed push(Sample<T>&& sample, std::stop_token stop) {
+    std::unique_lock lock{mutex_};
+    if (closed_) return Pushed::closed;
+    auto result = Pushed::delivered;
+    if (size_ == slots_.size()) {
+      if (overflow_ == Overflow::drop_oldest) {
+        take_front();
+        ++lost_;
+        result = Pushed::dropped_oldest;
+      } else {
+        ++waiting_writers_;
+        const bool room = not_full_.wait_until(lock, stop, Clock::now() + block_timeout_,
+                                               [&] { return size_ < slots_.size() || closed_; });
+        --waiting_writers_;
+        if (closed_) return Pushed::closed;
+        if (!room) {
+          ++lost_;
+          return stop.stop_requested() ? Pushed::stopped : Pushed::timed_out;
+        }
+      }
+    }
+    slots_[(head_ + size_) % slots_.size()].emplace(std::move(sample));
+    ++size_;
+    if (waiting_readers_ > 0) not_empty_.notify_one();
+    return result;
+  }
+
+  [[nodiscard]] std::optional<Sample<T>> try_pop() {
+    std::scoped_lock lock{mutex_};
+    if (size_ == 0) return std::nullopt;
+    return take_front();
+  }
+
+  [[nodiscard]] std::expected<Sample<T>, Errc> pop_until(Clock::time_point deadline,
+                                                         std::stop_token stop) {
+    std::unique_lock lock{mutex_};
+    if (size_ == 0) {
+      ++waiting_readers_;
+      const auto ready = [&] { return size_ > 0; };
+      const bool got = deadline == Clock::time_point::max()
+                           ? not_empty_.wait(lock, stop, ready)
+                           : not_empty_.wait_until(lock, stop, deadline, ready);
+      --waiting_readers_;
+      if (!got) return std::unexpected(stop.stop_requested() ? Errc::stopped : Errc::timeout);
+    }
+    return take_front();
+  }
+
+  // The reader is gone: writers stop waiting for it and drop what they bring.
+  void close() {
+    std::scoped_lock lock{mutex_};
+    closed_ = true;
+    not_full_.notify_all();
+  }
+
+  [[nodiscard]] std::uint64_t lost() const {
+    std::scoped_lock lock{mutex_};
+    return lost_;
+  }
+
+ private:
+  Sample<T> take_front() {
+    auto& slot = slots_[head_];
+    Sample<T> sample = std::move(*slot);
+    slot.reset();
+    head_ = (head_ + 1) % slots_.size();
+    --size_;
+    if (waiting_writers_ > 0) not_full_.notify_one();
+    return sample;
+  }
+
+  mutable std::mutex mutex_;
+  std::condition_variable_any not_empty_;
+  std::condition_variable_any not_full_;
+  std::vector<std::optional<Sample<T>>> slots_;
+  std::size_t head_ = 0;
+  std::size_t size_ = 0;
+  std::uint64_t lost_ = 0;
+  int waiting_readers_ = 0;
+  int waiting_writers_ = 0;
+  bool closed_ = false;
+  const Overflow overflow_;
+  const std::chrono::milliseconds block_timeout_;
+};
+
+}  // namespace prime::detail

@@ -1,0 +1,73 @@
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <iostream>
+#include <mutex>
+#include <stop_token>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "prime/logic/error.hpp"
+#include "prime/logic/event.hpp"
+
+namespace prime::detail {
+
+// What a Core shares with the sources and workers it made: the worker
+// threads, and the channel their errors go to. Sources hold it weakly, so a
+// destroyed Core is noticed instead of kept alive.
+//
+// Thread-safe.
+class RuntimeState {
+ public:
+  explicit RuntimeState(std::string medium) : medium_{std::move(medium)} {}
+  RuntimeState(const RuntimeState&) = delete;
+  RuntimeState& operator=(const RuntimeState&) = delete;
+  ~RuntimeState() { stop(); }
+
+  [[nodiscard]] const std::string& medium() const noexcept { return medium_; }
+
+  void spawn(std::move_only_function<void(std::stop_token)> work) {
+    std::scoped_lock lock{mutex_};
+    if (stopping_) throw Failure{{Errc::stopped, medium_ + " core is shutting down: no new worker"}};
+    workers_.emplace_back([work = std::move(work)](std::stop_token stop) mutable { work(std::move(stop)); });
+  }
+
+  // Goes to every subscriber of the core's error source; with none, to stderr,
+  // so an error is never lost in silence.
+  void report(Error error) {
+    reported_.fetch_add(1, std::memory_order_relaxed);
+    if (errors_.listener_count() == 0) {
+      std::cerr << "prime [" << medium_ << "] " << error.describe() << '\n';
+      return;
+    }
+    errors_.emit(std::move(error));
+  }
+
+  [[nodiscard]] Event<Error>& errors() noexcept { return errors_; }
+  [[nodiscard]] std::uint64_t reported() const noexcept { return reported_.load(std::memory_order_relaxed); }
+
+  // Stops every worker and joins it. Idempotent; must not be called from a worker.
+  void stop() {
+    std::vector<std::jthread> workers;
+    {
+      std::scoped_lock lock{mutex_};
+      stopping_ = true;
+      workers.swap(workers_);
+    }
+    for (auto& w : workers) w.request_stop();
+    workers.clear();  // joins
+  }
+
+ private:
+  const std::string medium_;
+  std::mutex mutex_;
+  bool stopping_ = false;
+  std::vector<std::jthread> workers_;
+  Event<Error> errors_;
+  std::atomic<std::uint64_t> reported_{0};
+};
+
+}  // namespace prime::detail

@@ -1,0 +1,168 @@
+#pragma once
+
+#include <concepts>
+#include <memory>
+#include <mutex>
+#include <stop_token>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "prime/logic/error.hpp"
+#include "prime/logic/event.hpp"
+#include "prime/logic/reader.hpp"
+#include "prime/topology/detail/queue.hpp"
+#include "prime/topology/detail/runtime_state.hpp"
+#include "prime/topology/graph.hpp"
+#include "prime/topology/qos.hpp"
+
+namespace prime {
+
+namespace detail {
+
+// Fans each published value out to every reader's own bounded queue: the last
+// reader gets the value moved, the others a copy.
+//
+// Thread-safe: publish, attach and detach may run concurrently.
+template <class T>
+class Hub {
+ public:
+  Hub(std::string name, Qos qos, std::weak_ptr<RuntimeState> runtime)
+      : name_{std::move(name)}, qos_{qos}, runtime_{std::move(runtime)} {
+    if (qos_.capacity == 0) throw Failure{{Errc::limit_exceeded, "source '" + name_ + "': capacity must be at least 1"}};
+  }
+
+  [[nodiscard]] const std::string& name() const noexcept { return name_; }
+  [[nodiscard]] const Qos& qos() const noexcept { return qos_; }
+  [[nodiscard]] const std::weak_ptr<RuntimeState>& runtime() const noexcept { return runtime_; }
+
+  void publish(Sample<T>&& sample, std::stop_token stop) {
+    auto readers = snapshot();
+    const auto n = readers->size();
+    for (std::size_t i = 0; i + 1 < n; ++i) {
+      if constexpr (std::copy_constructible<T>) deliver(*(*readers)[i], Sample<T>{sample}, stop);
+    }
+    if (n > 0) deliver(*readers->back(), std::move(sample), stop);
+  }
+
+  [[nodiscard]] std::shared_ptr<Queue<T>> attach(const Qos& qos) {
+    if (qos.capacity == 0) throw Failure{{Errc::limit_exceeded, "source '" + name_ + "': capacity must be at least 1"}};
+    auto queue = std::make_shared<Queue<T>>(qos);
+    std::scoped_lock lock{mutex_};
+    if (!std::copy_constructible<T> && !readers_->empty())
+      throw Failure{{Errc::limit_exceeded, "source '" + name_ + "' carries a move-only type: it can have one reader only"}};
+    auto next = std::make_shared<List>(*readers_);
+    next->push_back(queue);
+    readers_ = std::move(next);
+    return queue;
+  }
+
+  void detach(const Queue<T>* queue) {
+    std::scoped_lock lock{mutex_};
+    auto next = std::make_shared<List>(*readers_);
+    std::erase_if(*next, [queue](const auto& q) { return q.get() == queue; });
+    readers_ = std::move(next);
+  }
+
+  void feed_from(Connection upstream) { upstream_ = std::move(upstream); }
+
+ private:
+  using List = std::vector<std::shared_ptr<Queue<T>>>;
+
+  std::shared_ptr<const List> snapshot() {
+    std::scoped_lock lock{mutex_};
+    return readers_;
+  }
+
+  void deliver(Queue<T>& queue, Sample<T>&& sample, std::stop_token stop) {
+    if (queue.push(std::move(sample), std::move(stop)) != Queue<T>::Pushed::timed_out) return;
+    if (auto runtime = runtime_.lock())
+      runtime->report({Errc::overflow, "source '" + name_ + "': a reader made no room within " +
+                                           std::to_string(qos_.block_timeout.count()) +
+                                           " ms (block policy); the value was dropped for that reader"});
+  }
+
+  const std::string name_;
+  const Qos qos_;
+  const std::weak_ptr<RuntimeState> runtime_;
+  std::mutex mutex_;
+  std::shared_ptr<const List> readers_ = std::make_shared<const List>();
+  Connection upstream_;  // last member: disconnects before the rest goes
+};
+
+template <class T>
+class QueueReader final : public Reader<T>::Impl {
+ public:
+  QueueReader(std::shared_ptr<Hub<T>> hub, const Qos& qos) : hub_{std::move(hub)}, queue_{hub_->attach(qos)} {}
+  ~QueueReader() override {
+    queue_->close();
+    hub_->detach(queue_.get());
+  }
+  QueueReader(const QueueReader&) = delete;
+  QueueReader& operator=(const QueueReader&) = delete;
+
+  std::optional<Sample<T>> try_read() override { return queue_->try_pop(); }
+
+  std::expected<Sample<T>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
+    auto sample = queue_->pop_until(deadline, std::move(stop));
+    if (sample) return std::move(*sample);
+    const auto code = sample.error();
+    return std::unexpected(Error{code, "source '" + hub_->name() + "': " +
+                                           (code == Errc::stopped ? "the reader was stopped"
+                                                                  : "no value before the deadline")});
+  }
+
+  [[nodiscard]] std::uint64_t lost() const override { return queue_->lost(); }
+
+ private:
+  std::shared_ptr<Hub<T>> hub_;  // a reader keeps its source alive
+  std::shared_ptr<Queue<T>> queue_;
+};
+
+}  // namespace detail
+
+// An in-process source: a bounded buffer per reader, filled by an Event, by a
+// worker running a linked chain, or by `publish`. Copies are handles to the
+// same source. It is the medium-independent way values move between threads
+// in one process, so every medium's linked sources end in one.
+//
+// Thread-safe.
+template <class T>
+class LocalSource {
+ public:
+  using value_type = T;
+
+  LocalSource(std::string name, Qos qos, std::weak_ptr<detail::RuntimeState> runtime, Graph graph)
+      : hub_{std::make_shared<detail::Hub<T>>(std::move(name), qos, std::move(runtime))},
+        graph_{std::make_shared<const Graph>(std::move(graph))} {}
+
+  // A new reader that sees every value published from now on.
+  [[nodiscard]] Reader<T> subscribe() const { return subscribe(hub_->qos()); }
+  [[nodiscard]] Reader<T> subscribe(const Qos& qos) const {
+    return Reader<T>{std::make_unique<detail::QueueReader<T>>(hub_, qos)};
+  }
+
+  // Hands a value to every reader, as the source's producer would. `stop`
+  // ends a wait for room under the block policy.
+  void publish(T value, Clock::time_point stamp = Clock::now(), std::stop_token stop = {}) const {
+    hub_->publish(Sample<T>{std::move(value), stamp}, std::move(stop));
+  }
+
+  // Feeds this source from an event until the source is gone.
+  void feed_from(Event<T>& event) const {
+    hub_->feed_from(event.connect([weak = std::weak_ptr<detail::Hub<T>>{hub_}](Sample<T>&& s) {
+      if (auto hub = weak.lock()) hub->publish(std::move(s), {});
+    }));
+  }
+
+  [[nodiscard]] const std::string& name() const noexcept { return hub_->name(); }
+  [[nodiscard]] const Qos& qos() const noexcept { return hub_->qos(); }
+  [[nodiscard]] const Graph& graph() const noexcept { return *graph_; }
+  [[nodiscard]] const std::weak_ptr<detail::RuntimeState>& runtime() const noexcept { return hub_->runtime(); }
+
+ private:
+  std::shared_ptr<detail::Hub<T>> hub_;
+  std::shared_ptr<const Graph> graph_;
+};
+
+}  // namespace prime

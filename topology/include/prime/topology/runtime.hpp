@@ -1,0 +1,87 @@
+#pragma once
+
+#include <exception>
+#include <memory>
+#include <stop_token>
+#include <string>
+#include <string_view>
+#include <utility>
+
+#include "prime/logic/error.hpp"
+#include "prime/logic/event.hpp"
+#include "prime/logic/reader.hpp"
+#include "prime/topology/detail/runtime_state.hpp"
+#include "prime/topology/graph.hpp"
+#include "prime/topology/local_source.hpp"
+#include "prime/topology/qos.hpp"
+
+namespace prime {
+
+// What every Core has, whatever its medium: the workers it started, in-process
+// sources made from events, and the channel worker errors go to. Destroying it
+// stops and joins every worker it started.
+//
+// Thread-safe.
+class Runtime {
+ public:
+  explicit Runtime(std::string medium) : state_{std::make_shared<detail::RuntimeState>(std::move(medium))} {}
+  Runtime(const Runtime&) = delete;
+  Runtime& operator=(const Runtime&) = delete;
+  ~Runtime() { state_->stop(); }
+
+  // A source of what `event` raises from now on. The event may be destroyed
+  // before or after the source.
+  template <class T>
+  [[nodiscard]] LocalSource<T> source(Event<T>& event, std::string name = "source", Qos qos = {}) {
+    LocalSource<T> source{name, qos, state_, Graph::node(name, "source", medium())};
+    source.feed_from(event);
+    return source;
+  }
+
+  // Every error a worker of this core reports: a user block that threw, a
+  // reader that made no room in time. With no subscriber, errors go to stderr.
+  [[nodiscard]] LocalSource<Error> errors(Qos qos = {.capacity = 256}) {
+    LocalSource<Error> source{"errors", qos, state_, Graph::node("errors", "source", medium())};
+    source.feed_from(state_->errors());
+    return source;
+  }
+
+  // Stops and joins every worker now; linking afterwards throws.
+  void stop() { state_->stop(); }
+
+  [[nodiscard]] std::string_view medium() const noexcept { return state_->medium(); }
+  [[nodiscard]] std::weak_ptr<detail::RuntimeState> runtime() const noexcept { return state_; }
+
+ private:
+  std::shared_ptr<detail::RuntimeState> state_;
+};
+
+namespace detail {
+
+// Runs `on_sample(sample, stop)` for every value `reader` gets, in a worker of
+// `runtime`, until that runtime stops. What `on_sample` throws is reported
+// under `what`, and the worker goes on with the next value.
+template <class T, class F>
+void spawn_reader(const std::weak_ptr<RuntimeState>& runtime, Reader<T> reader, std::string what,
+                  F on_sample) {
+  auto owner = runtime.lock();
+  if (!owner) throw Failure{{Errc::stopped, what + ": the core that owns the source is gone"}};
+  owner->spawn([runtime, reader = std::move(reader), what = std::move(what),
+                on_sample = std::move(on_sample)](std::stop_token stop) mutable {
+    while (true) {
+      auto sample = reader.read_until(Clock::time_point::max(), stop);
+      if (!sample) return;  // with no deadline, only a stop ends the wait
+      try {
+        on_sample(std::move(*sample), stop);
+      } catch (const std::exception& e) {
+        if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": " + e.what()});
+      } catch (...) {
+        if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": an exception of unknown type"});
+      }
+    }
+  });
+}
+
+}  // namespace detail
+
+}  // namespace prime
