@@ -33,7 +33,7 @@ class Runtime {
   // before or after the source.
   template <class T>
   [[nodiscard]] LocalSource<T> source(Event<T>& event, std::string name = "source", Qos qos = {}) {
-    LocalSource<T> source{name, qos, state_, Graph::node(name, "source", medium())};
+    LocalSource<T> source{name, qos, state_, Graph::node(name, "source", state_->medium())};
     source.feed_from(event);
     return source;
   }
@@ -41,7 +41,7 @@ class Runtime {
   // Every error a worker of this core reports: a user block that threw, a
   // reader that made no room in time. With no subscriber, errors go to stderr.
   [[nodiscard]] LocalSource<Error> errors(Qos qos = {.capacity = 256}) {
-    LocalSource<Error> source{"errors", qos, state_, Graph::node("errors", "source", medium())};
+    LocalSource<Error> source{"errors", qos, state_, Graph::node("errors", "source", state_->medium())};
     source.feed_from(state_->errors());
     return source;
   }

@@ -59,18 +59,18 @@ class Synchronizer {
     std::scoped_lock lock{mutex_};  // held while publishing, so matches leave in order
     if (policy_.kind == SyncPolicy::Kind::latest_of_each) {
       std::get<I>(latest_) = std::move(sample);
-      if constexpr (I == 0) publish_latest(stop);
+      if constexpr (I == 0) publish_latest(stop, std::make_index_sequence<kInputs>{});
       return;
     }
     auto& queue = std::get<I>(queues_);
     if (queue.size() == policy_.depth) queue.pop_front();
     queue.push_back(std::move(sample));
-    publish_matches(stop);
+    publish_matches(stop, std::make_index_sequence<kInputs>{});
   }
 
  private:
   template <std::size_t... I>
-  void publish_latest(std::stop_token& stop, std::index_sequence<I...> = std::make_index_sequence<kInputs>{}) {
+  void publish_latest(std::stop_token& stop, std::index_sequence<I...>) {
     if (!(std::get<I>(latest_).has_value() && ...)) return;
     const auto stamp = std::get<0>(latest_)->stamp;
     out_.publish(Tuple{take_or_copy<I>()...}, stamp, stop);
@@ -88,7 +88,7 @@ class Synchronizer {
   }
 
   template <std::size_t... I>
-  void publish_matches(std::stop_token& stop, std::index_sequence<I...> = std::make_index_sequence<kInputs>{}) {
+  void publish_matches(std::stop_token& stop, std::index_sequence<I...>) {
     while ((!std::get<I>(queues_).empty() && ...)) {
       const std::array<Clock::time_point, kInputs> heads{std::get<I>(queues_).front().stamp...};
       const auto [lo, hi] = std::ranges::minmax_element(heads);
