@@ -24,8 +24,13 @@ struct signature_input<R(A)> {
   using type = std::remove_cvref_t<A>;
 };
 
+// What the one call signature of a callable takes; empty when there is none
+// to find (a generic lambda, an overloaded functor).
 template <class F>
-struct callable_input : callable_input<decltype(&F::operator())> {};
+struct callable_input {};
+template <class F>
+  requires requires { &F::operator(); }
+struct callable_input<F> : callable_input<decltype(&F::operator())> {};
 template <class R, class A>
 struct callable_input<R (*)(A)> : signature_input<R(A)> {};
 template <class R, class A>

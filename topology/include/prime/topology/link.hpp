@@ -57,6 +57,9 @@ template <Chain A, Chain B>
 
 // source | chain: a new source of the chain's outputs, computed by one worker
 // of the source's core. Chains linked together before share that one worker.
+// A link is a lasting part of the topology: its worker runs until the core
+// stops, whether or not anyone still holds the returned source (a chain that
+// drives actuators may have no reader at all).
 template <Source S, Chain C>
 [[nodiscard]] auto operator|(S source, C chain) {
   using In = typename S::value_type;

@@ -1,0 +1,262 @@
+// The paper's Table 1: chains of 100 services, each adding one to a counter,
+// for every way Prime carries a chain and for the paper's peers, in one run.
+//
+//   FOR       m = add(m) a hundred times, by hand
+//   Radiant   add | add | ... | add, fused at compile time
+//   Liberty   add | add | ... | add, linked at run time
+//   Sources   producer -> event -> source -> [100-hop Liberty chain] -> output -> this thread
+//   CCR-like  producer -> port 0 -> dispatcher -> port 1 -> ... -> port 100 -> this thread
+//
+// Arguments: payload bytes, width (1, or 2 chains side by side). Each reports
+// `ns_per_hop`, wall time per message and hop; bench/table1.sh makes the table.
+
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <optional>
+#include <stop_token>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "ccr_like.hpp"
+#include "prime/liberty.hpp"
+#include "prime/radiant.hpp"
+#include "services.hpp"
+
+namespace {
+
+using prime::Clock;
+using prime::bench::add;
+using prime::bench::Message;
+using namespace std::chrono_literals;
+
+constexpr std::int64_t kHops = 100;
+constexpr std::int64_t kBatch = 1000;  // messages the producer emits per iteration of a threaded peer
+constexpr auto kReadTimeout = 5s;
+constexpr int kDispatcherThreads = 2;
+const prime::Qos kQos{.capacity = 1024, .overflow = prime::Overflow::block};
+
+// The same service as `add`, but visible to the optimiser here, which may fold
+// a hundred calls into one. Used only by the *_Inlined benchmarks.
+Message add_inlined(Message m) {
+  ++m.counter;
+  return m;
+}
+
+void table1_args(benchmark::internal::Benchmark* b) { b->ArgsProduct({{100, 1024, 10240}, {1, 2}}); }
+
+std::vector<Message> make_messages(const benchmark::State& state, std::int64_t count) {
+  std::vector<Message> messages;
+  for (std::int64_t i = 0; i < count; ++i) messages.push_back(prime::bench::make_message(state.range(0)));
+  return messages;
+}
+
+void report(benchmark::State& state, Clock::duration elapsed, std::int64_t messages) {
+  state.SetItemsProcessed(messages);
+  state.counters["ns_per_hop"] =
+      static_cast<double>(std::chrono::duration_cast<std::chrono::nanoseconds>(elapsed).count()) /
+      static_cast<double>(messages * kHops);
+}
+
+// ---- synchronous peers: one thread, `width` messages per iteration --------
+
+template <class Run>
+void run_chains(benchmark::State& state, Run run) {
+  auto messages = make_messages(state, state.range(1));
+  const auto start = Clock::now();
+  for (auto _ : state) {
+    for (auto& m : messages) {
+      m = run(std::move(m));
+      benchmark::DoNotOptimize(m);
+    }
+  }
+  const auto elapsed = Clock::now() - start;
+  for (const auto& m : messages) {
+    if (m.counter != static_cast<std::uint64_t>(state.iterations() * kHops)) {
+      state.SkipWithError("a message missed a hop");
+      return;
+    }
+  }
+  report(state, elapsed, state.iterations() * state.range(1));
+}
+
+template <Message (*Add)(Message)>
+void for_loop(benchmark::State& state) {
+  run_chains(state, [](Message m) {
+    for (std::int64_t i = 0; i < kHops; ++i) m = Add(std::move(m));
+    return m;
+  });
+}
+
+template <Message (*Add)(Message), std::size_t... I>
+auto radiant_chain(prime::radiant::Core& core, std::index_sequence<I...>) {
+  return (... | ((void)I, core.chain(Add)));
+}
+
+template <Message (*Add)(Message)>
+void radiant(benchmark::State& state) {
+  prime::radiant::Core core;
+  const auto chain = radiant_chain<Add>(core, std::make_index_sequence<kHops>{});
+  run_chains(state, [&chain](Message m) { return chain(std::move(m)); });
+}
+
+prime::liberty::Chain<Message, Message> liberty_chain(prime::liberty::Core& core) {
+  auto chain = core.chain(add);
+  for (std::int64_t i = 1; i < kHops; ++i) chain = chain | core.chain(add);
+  return chain;
+}
+
+void BM_For(benchmark::State& state) { for_loop<add>(state); }
+void BM_Radiant(benchmark::State& state) { radiant<add>(state); }
+void BM_Liberty(benchmark::State& state) {
+  prime::liberty::Core core;
+  const auto chain = liberty_chain(core);
+  run_chains(state, [&chain](Message m) { return chain(std::move(m)); });
+}
+
+void BM_For_Inlined(benchmark::State& state) { for_loop<add_inlined>(state); }
+void BM_Radiant_Inlined(benchmark::State& state) { radiant<add_inlined>(state); }
+
+// ---- threaded peers: a producer thread, results read by this thread -------
+
+// Emits each batch it is given from a thread of its own, as a driver would.
+class Producer {
+ public:
+  explicit Producer(std::function<void(Message)> emit) : emit_{std::move(emit)} {}
+
+  void send(std::vector<Message> batch) {
+    {
+      std::scoped_lock lock{mutex_};
+      next_ = std::move(batch);
+    }
+    ready_.notify_one();
+  }
+
+ private:
+  void run(const std::stop_token& stop) {
+    while (true) {
+      std::vector<Message> batch;
+      {
+        std::unique_lock lock{mutex_};
+        if (!ready_.wait(lock, stop, [&] { return next_.has_value(); })) return;
+        batch = *std::exchange(next_, std::nullopt);
+      }
+      for (auto& m : batch) {
+        if (stop.stop_requested()) return;
+        emit_(std::move(m));
+      }
+    }
+  }
+
+  std::function<void(Message)> emit_;
+  std::mutex mutex_;
+  std::condition_variable_any ready_;
+  std::optional<std::vector<Message>> next_;
+  std::jthread thread_{[this](std::stop_token stop) { run(stop); }};  // last member: stops first
+};
+
+// One iteration: the producer emits kBatch messages and this thread reads the
+// kBatch * width results, one from each output in turn, checking that each
+// went through every hop. Results become the next batch while the timer is
+// paused, so no allocation is timed.
+template <class Read>
+void run_batches(benchmark::State& state, Producer& producer, Read read) {
+  const auto width = state.range(1);
+  auto batch = make_messages(state, kBatch);
+  std::vector<Message> results;
+  results.reserve(static_cast<std::size_t>(kBatch * width));
+  Clock::duration busy{};
+  for (auto _ : state) {
+    const auto start = Clock::now();
+    producer.send(std::move(batch));
+    for (std::int64_t i = 0; i < kBatch; ++i) {
+      for (std::int64_t lane = 0; lane < width; ++lane) {
+        std::optional<Message> m = read(lane, Clock::now() + kReadTimeout);
+        if (!m) {
+          state.SkipWithError("a message did not arrive within 5 s");
+          return;
+        }
+        results.push_back(std::move(*m));
+      }
+    }
+    busy += Clock::now() - start;
+
+    state.PauseTiming();
+    for (const auto& m : results) {
+      if (m.counter != static_cast<std::uint64_t>(kHops)) {
+        state.SkipWithError("a message arrived without going through every hop");
+        return;
+      }
+    }
+    results.resize(static_cast<std::size_t>(kBatch));
+    for (auto& m : results) m.counter = 0;
+    batch = std::exchange(results, {});
+    results.reserve(static_cast<std::size_t>(kBatch * width));
+    state.ResumeTiming();
+  }
+  report(state, busy, state.iterations() * kBatch * width);
+}
+
+void BM_Sources(benchmark::State& state) {
+  // Liberty, as DESIGN.md asks for the source -> chain throughput: the chain a
+  // system assembles at run time. The source queues, not the chain, dominate.
+  prime::liberty::Core core;
+  prime::Event<Message> event;
+  auto input = core.source(event, "input", kQos);
+  std::vector<prime::Reader<Message>> outputs;
+  for (std::int64_t lane = 0; lane < state.range(1); ++lane) outputs.push_back((input | liberty_chain(core)).subscribe());
+
+  Producer producer{[&event](Message m) { event.emit(std::move(m)); }};
+  run_batches(state, producer, [&outputs](std::int64_t lane, Clock::time_point deadline) -> std::optional<Message> {
+    auto sample = outputs[static_cast<std::size_t>(lane)].read_until(deadline);
+    if (!sample) return std::nullopt;
+    return std::move(sample->value);
+  });
+  // Workers go first: a producer still waiting for room in a queue is let go.
+  core.stop();
+}
+
+void BM_CcrLike(benchmark::State& state) {
+  namespace ccr = prime::bench::ccr;
+  const auto width = static_cast<std::size_t>(state.range(1));
+  constexpr auto kPorts = static_cast<std::size_t>(kHops) + 1;  // per lane: one per service, one for the result
+  std::deque<ccr::Port<Message>> ports(width * kPorts);
+  const auto port = [&ports](std::size_t lane, std::size_t i) -> ccr::Port<Message>& { return ports[lane * kPorts + i]; };
+
+  ccr::Dispatcher<Message> dispatcher{kDispatcherThreads};  // after the ports: its threads stop before they go
+  for (std::size_t lane = 0; lane < width; ++lane) {
+    for (std::size_t i = 0; i < kPorts - 1; ++i) {
+      port(lane, i).receive_with(dispatcher, [&next = port(lane, i + 1)](Message m) { next.post(add(std::move(m))); });
+    }
+  }
+
+  Producer producer{[&](Message m) {
+    for (std::size_t lane = 0; lane + 1 < width; ++lane) port(lane, 0).post(m);
+    port(width - 1, 0).post(std::move(m));
+  }};
+  run_batches(state, producer, [&](std::int64_t lane, Clock::time_point deadline) {
+    return port(static_cast<std::size_t>(lane), kPorts - 1).receive_until(deadline);
+  });
+}
+
+}  // namespace
+
+BENCHMARK(BM_For)->Apply(table1_args);
+BENCHMARK(BM_Radiant)->Apply(table1_args);
+BENCHMARK(BM_Liberty)->Apply(table1_args);
+BENCHMARK(BM_Sources)->Apply(table1_args)->UseRealTime();
+BENCHMARK(BM_CcrLike)->Apply(table1_args)->UseRealTime();
+
+// Not part of Table 1: FOR and Radiant with the service visible to the
+// optimiser, to check that fusion folds whatever the loop folds.
+BENCHMARK(BM_For_Inlined)->Apply(table1_args);
+BENCHMARK(BM_Radiant_Inlined)->Apply(table1_args);
+
+BENCHMARK_MAIN();

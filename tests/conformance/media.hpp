@@ -1,0 +1,60 @@
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <memory>
+#include <string>
+
+#include "prime/liberty.hpp"
+#include "prime/radiant.hpp"
+
+namespace prime::test {
+
+// Every medium the conformance suite runs on. A medium joins with one entry
+// here (and, if it needs constructor arguments or carries sources its own way,
+// a specialisation of Harness below).
+using Media = ::testing::Types<liberty::Core, radiant::Core>;
+
+// How the suite makes a core, and a source it can publish into, on a medium.
+// The default serves in-process media: an Event feeding core.source().
+template <class M>
+struct Harness {
+  static std::unique_ptr<M> make_core() { return std::make_unique<M>(); }
+
+  template <class T>
+  struct Feed {
+    std::unique_ptr<Event<T>> event;
+    decltype(std::declval<M&>().source(std::declval<Event<T>&>())) source;
+
+    void emit(T value) { event->emit(std::move(value)); }
+    void emit(T value, Clock::time_point stamp) { event->emit(std::move(value), stamp); }
+  };
+
+  template <class T>
+  static Feed<T> feed(M& core, std::string name, Qos qos = {}) {
+    auto event = std::make_unique<Event<T>>();
+    auto source = core.source(*event, std::move(name), qos);
+    return {std::move(event), std::move(source)};
+  }
+};
+
+template <class M>
+class MediumTest : public ::testing::Test {
+ protected:
+  using Core = M;
+  template <class T>
+  auto feed(std::string name, Qos qos = {}) {
+    return Harness<M>::template feed<T>(*core, std::move(name), qos);
+  }
+  std::unique_ptr<M> core = Harness<M>::make_core();
+};
+
+class MediumName {
+ public:
+  template <class M>
+  static std::string GetName(int) {
+    return std::string{Harness<M>::make_core()->medium()};
+  }
+};
+
+}  // namespace prime::test

@@ -1,0 +1,473 @@
+// Asynchronous sources, readers, workers, collectors and sync: every behaviour
+// written once, run on every medium.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <tuple>
+#include <vector>
+
+#include "conformance/media.hpp"
+#include "support/lifetime.hpp"
+
+namespace prime::test {
+namespace {
+
+using namespace std::chrono_literals;
+constexpr auto kPatience = 5s;  // generous: only a broken implementation waits this long
+
+int twice(int x) { return 2 * x; }
+
+// Waits (with a deadline) until `done` holds; for effects a worker has on the world.
+template <class F>
+bool eventually(F done) {
+  const auto deadline = Clock::now() + kPatience;
+  while (!done()) {
+    if (Clock::now() > deadline) return false;
+    std::this_thread::sleep_for(1ms);
+  }
+  return true;
+}
+
+template <class M>
+using SourceTest = MediumTest<M>;
+TYPED_TEST_SUITE(SourceTest, Media, MediumName);
+
+TYPED_TEST(SourceTest, ReaderSeesValuesInOrderWithTheirStamps) {
+  auto lidar = this->template feed<int>("lidar");
+  auto reader = lidar.source.subscribe();
+  const auto t0 = Clock::now();
+  lidar.emit(1, t0);
+  lidar.emit(2, t0 + 1ms);
+  auto first = reader.try_read();
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->value, 1);
+  EXPECT_EQ(first->stamp, t0);
+  auto rest = reader.read_all();
+  ASSERT_EQ(rest.size(), 1u);
+  EXPECT_EQ(rest[0].value, 2);
+  EXPECT_FALSE(reader.try_read());
+}
+
+TYPED_TEST(SourceTest, EachReaderHasItsOwnCursor) {
+  auto lidar = this->template feed<int>("lidar");
+  auto early = lidar.source.subscribe();
+  lidar.emit(1);
+  auto late = lidar.source.subscribe();
+  lidar.emit(2);
+  EXPECT_EQ(early.read_all().size(), 2u);
+  auto late_values = late.read_all();
+  ASSERT_EQ(late_values.size(), 1u) << "a reader sees what is published after it subscribed";
+  EXPECT_EQ(late_values[0].value, 2);
+}
+
+TYPED_TEST(SourceTest, LatestSkipsToTheNewestAndKeepsIt) {
+  auto odom = this->template feed<int>("odom");
+  auto reader = odom.source.subscribe();
+  EXPECT_FALSE(reader.latest());
+  odom.emit(1);
+  odom.emit(2);
+  odom.emit(3);
+  EXPECT_EQ(reader.latest()->value, 3);
+  EXPECT_EQ(reader.latest()->value, 3) << "nothing newer: the same latest value";
+  EXPECT_FALSE(reader.try_read());
+}
+
+TYPED_TEST(SourceTest, BlockingReadTimesOutAtItsDeadline) {
+  auto odom = this->template feed<int>("odom");
+  auto reader = odom.source.subscribe();
+  auto nothing = reader.read_for(20ms);
+  ASSERT_FALSE(nothing);
+  EXPECT_EQ(nothing.error().code, Errc::timeout);
+  EXPECT_NE(nothing.error().message.find("odom"), std::string::npos) << "the error names the source";
+}
+
+TYPED_TEST(SourceTest, BlockingReadWakesWhenAValueArrives) {
+  auto odom = this->template feed<int>("odom");
+  auto reader = odom.source.subscribe();
+  std::jthread producer{[&] {
+    std::this_thread::sleep_for(10ms);
+    odom.emit(42);
+  }};
+  auto value = reader.read_for(kPatience);
+  ASSERT_TRUE(value) << value.error().describe();
+  EXPECT_EQ(value->value, 42);
+}
+
+TYPED_TEST(SourceTest, BlockingReadEndsOnStopRequest) {
+  auto odom = this->template feed<int>("odom");
+  auto reader = odom.source.subscribe();
+  std::stop_source stop;
+  std::jthread stopper{[&] {
+    std::this_thread::sleep_for(10ms);
+    stop.request_stop();
+  }};
+  auto value = reader.read_for(kPatience, stop.get_token());
+  ASSERT_FALSE(value);
+  EXPECT_EQ(value.error().code, Errc::stopped);
+}
+
+TYPED_TEST(SourceTest, DropOldestKeepsTheNewestAndCountsTheLost) {
+  auto scans = this->template feed<int>("scans", {.capacity = 4, .overflow = Overflow::drop_oldest});
+  auto reader = scans.source.subscribe();
+  for (int i = 0; i < 10; ++i) scans.emit(i);
+  auto kept = reader.read_all();
+  ASSERT_EQ(kept.size(), 4u) << "bounded: never more than the capacity";
+  EXPECT_EQ(kept.front().value, 6);
+  EXPECT_EQ(kept.back().value, 9);
+  EXPECT_EQ(reader.lost(), 6u);
+}
+
+TYPED_TEST(SourceTest, BlockWaitsForTheReaderAndLosesNothing) {
+  auto cmds = this->template feed<int>("cmds", {.capacity = 2, .overflow = Overflow::block});
+  auto reader = cmds.source.subscribe();
+  std::jthread producer{[&] {
+    for (int i = 0; i < 100; ++i) cmds.emit(i);
+  }};
+  for (int i = 0; i < 100; ++i) {
+    auto value = reader.read_for(kPatience);
+    ASSERT_TRUE(value) << value.error().describe();
+    EXPECT_EQ(value->value, i);
+  }
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
+TYPED_TEST(SourceTest, BlockGivesUpOnAStuckReaderAtTheTimeoutAndReportsIt) {
+  auto errors = this->core->errors().subscribe();
+  auto cmds = this->template feed<int>(
+      "cmds", {.capacity = 1, .overflow = Overflow::block, .block_timeout = std::chrono::milliseconds{20}});
+  auto stuck = cmds.source.subscribe();
+  cmds.emit(1);
+  cmds.emit(2);  // no room: waits 20 ms, then drops it for this reader
+  EXPECT_EQ(stuck.lost(), 1u);
+  auto report = errors.read_for(kPatience);
+  ASSERT_TRUE(report);
+  EXPECT_EQ(report->value.code, Errc::overflow);
+  EXPECT_NE(report->value.message.find("cmds"), std::string::npos);
+  EXPECT_EQ(stuck.try_read()->value, 1);
+}
+
+TYPED_TEST(SourceTest, ALinkedChainRunsInAWorkerAndKeepsTheStamp) {
+  auto& core = *this->core;
+  auto lidar = this->template feed<int>("lidar");
+  auto doubled = lidar.source | core.chain(twice);
+  auto reader = doubled.subscribe();
+  const auto stamp = Clock::now() - 1s;
+  lidar.emit(21, stamp);
+  auto value = reader.read_for(kPatience);
+  ASSERT_TRUE(value) << value.error().describe();
+  EXPECT_EQ(value->value, 42);
+  EXPECT_EQ(value->stamp, stamp) << "the stamp is the sensor's, not the worker's";
+}
+
+TYPED_TEST(SourceTest, ChainsLinkedFirstShareOneWorkerEachLinkHasItsOwn) {
+  auto& core = *this->core;
+  auto lidar = this->template feed<int>("lidar");
+  std::atomic<std::thread::id> a_thread, b_thread, c_thread;
+  auto a = core.chain([&](int x) { return a_thread = std::this_thread::get_id(), x; });
+  auto b = core.chain([&](int x) { return b_thread = std::this_thread::get_id(), x; });
+  auto c = core.chain([&](int x) { return c_thread = std::this_thread::get_id(), x; });
+  auto fused = lidar.source | (a | b);  // one link: one worker
+  auto staged = fused | c;              // another link: another worker
+  auto reader = staged.subscribe();
+  lidar.emit(1);
+  ASSERT_TRUE(reader.read_for(kPatience));
+  EXPECT_EQ(a_thread.load(), b_thread.load());
+  EXPECT_NE(b_thread.load(), c_thread.load());
+  EXPECT_NE(a_thread.load(), std::this_thread::get_id());
+}
+
+TYPED_TEST(SourceTest, AWorkerReportsABlocksExceptionAndKeepsRunning) {
+  auto& core = *this->core;
+  auto errors = core.errors().subscribe();
+  auto lidar = this->template feed<int>("lidar");
+  auto checked = lidar.source | core.chain(
+                                    [](int x) {
+                                      if (x < 0) throw std::invalid_argument{"negative range"};
+                                      return x;
+                                    },
+                                    "check");
+  auto reader = checked.subscribe();
+  lidar.emit(-1);
+  lidar.emit(7);
+  auto value = reader.read_for(kPatience);
+  ASSERT_TRUE(value);
+  EXPECT_EQ(value->value, 7) << "the worker went on after the exception";
+  auto report = errors.read_for(kPatience);
+  ASSERT_TRUE(report);
+  EXPECT_EQ(report->value.code, Errc::block_failed);
+  EXPECT_NE(report->value.message.find("negative range"), std::string::npos);
+  EXPECT_NE(report->value.message.find("lidar | check"), std::string::npos) << report->value.message;
+}
+
+TYPED_TEST(SourceTest, CollectorGivesTheLatestValueOnAToken) {
+  auto& core = *this->core;
+  auto odom = this->template feed<int>("odom");
+  auto now = collector(core, odom.source | core.chain(twice));
+  static_assert(std::same_as<typename decltype(now)::input_type, Token>);
+  try {
+    (void)now(Token{});
+    FAIL() << "nothing published yet";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.error().code, Errc::no_data);
+  }
+  odom.emit(1);
+  odom.emit(2);
+  ASSERT_TRUE(eventually([&] {
+    try {
+      return now(Token{}) == 4;
+    } catch (const Failure&) {
+      return false;
+    }
+  }));
+  EXPECT_EQ(now(Token{}), 4) << "still the latest";
+}
+
+TYPED_TEST(SourceTest, CollectorOfAllUnreadGivesEachValueOnce) {
+  auto& core = *this->core;
+  auto odom = this->template feed<int>("odom");
+  auto unread = collector(core, odom.source, all_unread);
+  odom.emit(1);
+  odom.emit(2);
+  EXPECT_EQ(unread(Token{}), (std::vector<int>{1, 2}));
+  EXPECT_TRUE(unread(Token{}).empty());
+}
+
+TYPED_TEST(SourceTest, CollectorFeedsASynchronousChain) {
+  auto& core = *this->core;
+  auto odom = this->template feed<int>("odom");
+  auto control = collector(core, odom.source) | core.chain(twice);
+  odom.emit(5);
+  EXPECT_EQ(control(Token{}), 10);
+}
+
+TYPED_TEST(SourceTest, SyncLatestOfEachPairsTheFirstSourceWithTheNewestOfTheOthers) {
+  auto lidar = this->template feed<int>("lidar");
+  auto odom = this->template feed<double>("odom");
+  auto fused = sync(latest_of_each, lidar.source, odom.source);
+  auto reader = fused.subscribe();
+  odom.emit(0.5);
+  odom.emit(1.5);
+  // Each source has its own worker: lidar values pair with whatever odom the
+  // sync has seen, and soon that is the newest, 1.5.
+  int sent = 0;
+  ASSERT_TRUE(eventually([&] {
+    lidar.emit(++sent);
+    auto pair = reader.read_for(10ms);
+    if (!pair) return false;
+    EXPECT_EQ(std::get<0>(pair->value), sent);
+    return std::get<1>(pair->value) == 1.5;
+  }));
+  odom.emit(2.5);
+  EXPECT_FALSE(reader.read_for(20ms)) << "only the first source's values make tuples";
+}
+
+TYPED_TEST(SourceTest, SyncApproximateTimeMatchesWithinTheTolerance) {
+  auto lidar = this->template feed<int>("lidar");
+  auto odom = this->template feed<int>("odom");
+  auto fused = sync(approximate_time(3ms), lidar.source, odom.source);
+  auto reader = fused.subscribe();
+  const auto t0 = Clock::now();
+  // Whatever order the two workers deliver in, only 21 and 20 lie within 3 ms.
+  for (int ms : {0, 20}) odom.emit(ms, t0 + std::chrono::milliseconds{ms});
+  for (int ms : {21, 50}) lidar.emit(ms, t0 + std::chrono::milliseconds{ms});
+  auto pair = reader.read_for(kPatience);
+  ASSERT_TRUE(pair) << pair.error().describe();
+  EXPECT_EQ(pair->value, (std::tuple<int, int>{21, 20}));
+  EXPECT_EQ(pair->stamp, t0 + 21ms) << "a tuple carries its newest stamp";
+  EXPECT_FALSE(reader.read_for(20ms));
+}
+
+TYPED_TEST(SourceTest, SyncExactTimeMatchesEqualStampsAndDropsTheUnmatched) {
+  auto lidar = this->template feed<int>("lidar");
+  auto odom = this->template feed<int>("odom");
+  auto fused = sync(exact_time, lidar.source, odom.source);
+  auto reader = fused.subscribe();
+  const auto t0 = Clock::now();
+  for (int i = 0; i < 6; ++i) odom.emit(100 + i, t0 + i * 10ms);
+  lidar.emit(1, t0 + 10ms);
+  lidar.emit(2, t0 + 25ms);  // no odom at 25 ms
+  lidar.emit(3, t0 + 40ms);
+  std::vector<std::tuple<int, int>> pairs;
+  for (int i = 0; i < 2; ++i) {
+    auto pair = reader.read_for(kPatience);
+    ASSERT_TRUE(pair) << pair.error().describe();
+    EXPECT_EQ(pair->stamp, t0 + (i == 0 ? 10ms : 40ms));
+    pairs.push_back(pair->value);
+  }
+  EXPECT_EQ(pairs, (std::vector<std::tuple<int, int>>{{1, 101}, {3, 104}}));
+  EXPECT_FALSE(reader.read_for(20ms)) << "lidar 2 had no partner";
+}
+
+TYPED_TEST(SourceTest, SyncedTuplesFeedACollectorAndAChain) {
+  auto& core = *this->core;
+  auto lidar = this->template feed<int>("lidar");
+  auto odom = this->template feed<int>("odom");
+  auto fused = collector(core, sync(exact_time, lidar.source, odom.source)) |
+               core.chain([](std::tuple<int, int> t) { return std::get<0>(t) + std::get<1>(t); });
+  const auto t0 = Clock::now();
+  lidar.emit(1, t0);
+  odom.emit(2, t0);
+  ASSERT_TRUE(eventually([&] {
+    try {
+      return fused(Token{}) == 3;
+    } catch (const Failure&) {
+      return false;
+    }
+  }));
+}
+
+TYPED_TEST(SourceTest, RepeatReadsTheSourceEachIteration) {
+  auto& core = *this->core;
+  auto ticks = this->template feed<int>("ticks", {.capacity = 16, .overflow = Overflow::block});
+  auto accumulate = repeat(core, core.chain([](std::pair<int, int> p) { return p.first + p.second; }),
+                           [](const int& sum) { return sum >= 6; }, ticks.source);
+  std::jthread driver{[&] {
+    for (int i = 1; i <= 3; ++i) ticks.emit(i);
+  }};
+  EXPECT_EQ(accumulate(0), 6);  // 0+1, +2, +3
+}
+
+TYPED_TEST(SourceTest, RepeatWaitingOnASilentSourceTimesOut) {
+  auto& core = *this->core;
+  auto ticks = this->template feed<int>("ticks");
+  auto accumulate = repeat(core, core.chain([](std::pair<int, int> p) { return p.first + p.second; }),
+                           [](const int&) { return false; }, ticks.source,
+                           RepeatLimits{.read_timeout = std::chrono::milliseconds{10}});
+  try {
+    (void)accumulate(0);
+    FAIL() << "expected a timeout";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.error().code, Errc::timeout);
+    EXPECT_NE(std::string{f.what()}.find("ticks"), std::string::npos);
+  }
+}
+
+TYPED_TEST(SourceTest, AnEventWithOneReaderMovesItsValueWithoutCopies) {
+  auto& core = *this->core;
+  auto step = [](Lifetime m) {
+    ++m.value;
+    return m;
+  };
+  Event<Lifetime> event;
+  auto source = core.source(event, "counted");
+  auto reader = (source | core.chain(step) | core.chain(step)).subscribe();
+  Lifetime::reset();
+  event.emit(Lifetime{1});
+  auto value = reader.read_for(kPatience);
+  ASSERT_TRUE(value);
+  EXPECT_EQ(value->value.value, 3);
+  EXPECT_EQ(Lifetime::copies, 0) << "one reader: the value is moved all the way";
+}
+
+TYPED_TEST(SourceTest, EachFurtherReaderCostsExactlyOneCopy) {
+  Event<Lifetime> event;
+  auto source = this->core->source(event, "counted");
+  auto r1 = source.subscribe();
+  auto r2 = source.subscribe();
+  auto r3 = source.subscribe();
+  Lifetime::reset();
+  event.emit(Lifetime{1});
+  EXPECT_EQ(Lifetime::copies, 2);
+  EXPECT_EQ(r1.try_read()->value.value, 1);
+  EXPECT_EQ(r3.try_read()->value.value, 1);
+  EXPECT_EQ(r2.try_read()->value.value, 1);
+}
+
+TYPED_TEST(SourceTest, SourcesBufferedValuesAreFreedWithTheirReaders) {
+  const int before = Lifetime::alive;
+  {
+    Event<Lifetime> event;
+    auto source = this->core->source(event, "counted", {.capacity = 8});
+    auto reader = source.subscribe();
+    for (int i = 0; i < 20; ++i) event.emit(Lifetime{i});
+    EXPECT_EQ(Lifetime::alive, before + 8);
+  }
+  EXPECT_EQ(Lifetime::alive, before);
+}
+
+TYPED_TEST(SourceTest, DescribesASourceTopology) {
+  auto& core = *this->core;
+  auto lidar = this->template feed<int>("lidar");
+  auto odom = this->template feed<int>("odom");
+  auto plan = collector(core, sync(exact_time, lidar.source | core.chain(twice, "filter"), odom.source)) |
+              core.chain([](std::tuple<int, int>) { return 0; }, "plan");
+  const auto text = plan.graph().text();
+  for (const char* edge : {"lidar [source", "-> filter [chain", "filter [chain", "-> sync(lidar | filter, odom) [sync",
+                           "odom [source", "-> collector [collector", "-> plan [chain"})
+    EXPECT_NE(text.find(edge), std::string::npos) << edge << " missing from:\n" << text;
+}
+
+// Destroyed in any order: never a crash, never a hang.
+
+TYPED_TEST(SourceTest, EventDestroyedBeforeItsSourceAndReaders) {
+  auto& core = *this->core;
+  auto event = std::make_unique<Event<int>>();
+  auto source = core.source(*event, "lidar");
+  auto linked = source | core.chain(twice);
+  auto reader = linked.subscribe();
+  event->emit(1);
+  ASSERT_TRUE(reader.read_for(kPatience));
+  event.reset();
+  EXPECT_FALSE(reader.read_for(10ms));
+}
+
+TYPED_TEST(SourceTest, SourceHandlesDroppedWhileTheEventGoesOn) {
+  auto& core = *this->core;
+  Event<int> event;
+  std::optional<Reader<int>> reader;
+  {
+    auto source = core.source(event, "lidar");
+    reader.emplace((source | core.chain(twice)).subscribe());
+  }
+  event.emit(4);  // the linked worker keeps the source alive for its reader
+  auto value = reader->read_for(kPatience);
+  ASSERT_TRUE(value);
+  EXPECT_EQ(value->value, 8);
+  reader.reset();
+  event.emit(5);  // nobody reads: nothing to do, nothing to crash
+  EXPECT_EQ(event.listener_count(), 1u) << "the linked worker still listens until its core stops";
+}
+
+TYPED_TEST(SourceTest, DestroyingTheCoreStopsAndJoinsItsWorkers) {
+  Event<int> event;
+  std::atomic<int> started{0}, finished{0};
+  auto source = this->core->source(event, "lidar");
+  auto slow = source | this->core->chain([&](int x) {
+    ++started;
+    std::this_thread::sleep_for(50ms);
+    ++finished;
+    return x;
+  });
+  auto reader = slow.subscribe();
+  event.emit(1);
+  ASSERT_TRUE(eventually([&] { return started == 1; }));
+  this->core.reset();  // waits for the running block, then joins
+  EXPECT_EQ(finished, 1) << "the core's destructor joined the worker";
+  event.emit(2);       // the worker is gone: nothing runs it
+  std::this_thread::sleep_for(60ms);
+  EXPECT_EQ(started, 1);
+  EXPECT_EQ(reader.read_all().size(), 1u);
+  EXPECT_THROW((void)(source | liberty::Core{}.chain(twice)), Failure) << "linking to a dead core's source";
+}
+
+TYPED_TEST(SourceTest, DestroyingTheCoreReleasesAWorkerBlockedOnAFullBuffer) {
+  Event<int> event;
+  auto source = this->core->source(event, "lidar");
+  auto relay = source | this->core->chain(twice);
+  auto full = relay.subscribe({.capacity = 1, .overflow = Overflow::block, .block_timeout = std::chrono::milliseconds{60'000}});
+  event.emit(1);
+  event.emit(2);  // the worker now waits for room that never comes
+  std::this_thread::sleep_for(20ms);
+  const auto t0 = Clock::now();
+  this->core.reset();
+  EXPECT_LT(Clock::now() - t0, 10s) << "stop ended the wait for room";
+  EXPECT_EQ(full.try_read()->value, 2);
+}
+
+}  // namespace
+}  // namespace prime::test
