@@ -125,7 +125,7 @@ class Graph {
     const Node* n = find(id);
     const auto same_name = std::ranges::count(nodes_, n->name, &Node::name);
     std::string name = n->name;
-    if (same_name > 1) name += "#" + std::to_string(n->id);
+    if (same_name > 1) name.append("#").append(std::to_string(n->id));
     return name + " [" + n->kind + ", " + n->medium + "]";
   }
   static std::string escaped(const std::string& s) {
