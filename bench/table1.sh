@@ -7,7 +7,7 @@
 #   cmake -S . -B build/release -DCMAKE_BUILD_TYPE=Release
 #   cmake --build build/release -j2 --target prime_table1
 #
-# Each benchmark runs 3 times for 0.1 s; the table shows the medians. The
+# Each benchmark runs 5 times for 0.2 s; the table shows the medians. The
 # benchmark's own progress goes to stderr, the table to stdout.
 set -euo pipefail
 
@@ -21,7 +21,7 @@ fi
 
 json="$(mktemp)"
 trap 'rm -f "$json"' EXIT
-"$binary" --benchmark_min_time=0.1 --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
+"$binary" --benchmark_min_time=0.2 --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
   --benchmark_out="$json" --benchmark_out_format=json "$@" >&2
 
 python3 - "$json" <<'EOF'

@@ -21,7 +21,7 @@ struct Fused {
   Second second;
 
   template <class X>
-  [[gnu::always_inline]] inline decltype(auto) operator()(X&& x) const {
+  [[gnu::always_inline]] constexpr decltype(auto) operator()(X&& x) const {
     return std::invoke(second, std::invoke(first, std::forward<X>(x)));
   }
 };

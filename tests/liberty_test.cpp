@@ -1,0 +1,43 @@
+// What only Liberty promises: topologies assembled while the program runs.
+#include <gtest/gtest.h>
+
+#include <map>
+#include <sstream>
+#include <string>
+
+#include "prime/liberty.hpp"
+
+namespace prime::test {
+namespace {
+
+TEST(LibertyTest, AChainIsAssembledFromAConfigAtRunTime) {
+  liberty::Core core;
+  const std::map<std::string, liberty::Chain<double, double>> blocks{
+      {"scale", core.chain([](double x) { return x * 10; }, "scale")},
+      {"offset", core.chain([](double x) { return x + 1; }, "offset")},
+      {"clamp", core.chain([](double x) { return std::min(x, 25.0); }, "clamp")},
+  };
+  std::istringstream config{"offset scale clamp"};
+  std::string name;
+  config >> name;
+  liberty::Chain<double, double> pipeline = blocks.at(name);
+  while (config >> name) pipeline = pipeline | blocks.at(name);
+
+  EXPECT_EQ(pipeline(0.5), 15.0);
+  EXPECT_EQ(pipeline(2.0), 25.0);
+  EXPECT_EQ(pipeline.graph().text(),
+            "offset [chain, liberty] -> scale [chain, liberty]\nscale [chain, liberty] -> clamp [chain, liberty]\n");
+}
+
+TEST(LibertyTest, LinkingSharesBlocksInsteadOfCopyingThem) {
+  liberty::Core core;
+  auto counted = std::make_shared<int>(0);
+  auto block = core.chain([counted](int x) { return x + *counted; });
+  const auto owners = counted.use_count();
+  auto longer = block | block | block;
+  EXPECT_EQ(counted.use_count(), owners) << "linked chains point at the block, they do not copy it";
+  EXPECT_EQ(longer(1), 1);
+}
+
+}  // namespace
+}  // namespace prime::test
