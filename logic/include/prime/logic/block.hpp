@@ -59,4 +59,23 @@ using block_input_t = typename detail::callable_input<std::remove_cvref_t<F>>::t
 template <class F>
 concept DeducibleBlock = requires { typename block_input_t<F>; };
 
+// A function known at compile time, as a block: `core.chain(prime::fn<&localize>)`.
+// A plain `core.chain(localize)` holds a function pointer, which a compiler
+// calls indirectly; this holds nothing, so a fused (Radiant) chain inlines it.
+template <auto F>
+struct Function {
+  template <class In>
+    requires std::invocable<decltype(F), In>
+  constexpr decltype(auto) operator()(In&& in) const {
+    return std::invoke(F, std::forward<In>(in));
+  }
+};
+template <auto F>
+inline constexpr Function<F> fn{};
+
+namespace detail {
+template <auto F>
+struct callable_input<Function<F>> : callable_input<decltype(F)> {};
+}  // namespace detail
+
 }  // namespace prime

@@ -29,6 +29,22 @@ class Reader {
     virtual std::expected<Sample<T>, Error> read_until(Clock::time_point deadline,
                                                        std::stop_token stop) = 0;
     [[nodiscard]] virtual std::uint64_t lost() const = 0;
+
+    // Waits like read_until for one value, then takes up to `max` in all.
+    // Media override it to take a batch at once.
+    virtual std::expected<std::size_t, Error> read_some(std::vector<Sample<T>>& out, std::size_t max,
+                                                        Clock::time_point deadline, std::stop_token stop) {
+      auto first = read_until(deadline, std::move(stop));
+      if (!first) return std::unexpected(std::move(first.error()));
+      out.push_back(std::move(*first));
+      std::size_t n = 1;
+      for (; n < max; ++n) {
+        auto next = try_read();
+        if (!next) break;
+        out.push_back(std::move(*next));
+      }
+      return n;
+    }
   };
 
   explicit Reader(std::unique_ptr<Impl> impl) : impl_{std::move(impl)} {}
@@ -53,6 +69,14 @@ class Reader {
   [[nodiscard]] std::expected<Sample<T>, Error> read_for(std::chrono::duration<Rep, Period> timeout,
                                                          std::stop_token stop = {}) {
     return read_until(Clock::now() + timeout, std::move(stop));
+  }
+
+  // Appends to `out` what is unread, at most `max` values, after waiting as
+  // read_until does for the first: how a worker drains a busy source with one
+  // wake-up for many values.
+  std::expected<std::size_t, Error> read_some(std::vector<Sample<T>>& out, std::size_t max,
+                                              Clock::time_point deadline, std::stop_token stop = {}) {
+    return impl_->read_some(out, max, deadline, std::move(stop));
   }
 
   // The newest value: skips to the end of what is unread and remembers it, so

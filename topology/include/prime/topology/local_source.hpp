@@ -104,17 +104,26 @@ class QueueReader final : public Reader<T>::Impl {
   std::optional<Sample<T>> try_read() override { return queue_->try_pop(); }
 
   std::expected<Sample<T>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
-    auto sample = queue_->pop_until(deadline, std::move(stop));
-    if (sample) return std::move(*sample);
-    const auto code = sample.error();
-    return std::unexpected(Error{code, "source '" + hub_->name() + "': " +
-                                           (code == Errc::stopped ? "the reader was stopped"
-                                                                  : "no value before the deadline")});
+    auto got = queue_->pop_until(deadline, std::move(stop));
+    if (!got) return std::unexpected(failure(got.error()));
+    return std::move(*got);
+  }
+
+  std::expected<std::size_t, Error> read_some(std::vector<Sample<T>>& out, std::size_t max,
+                                              Clock::time_point deadline, std::stop_token stop) override {
+    auto got = queue_->pop_some(out, max, deadline, std::move(stop));
+    if (!got) return std::unexpected(failure(got.error()));
+    return *got;
   }
 
   [[nodiscard]] std::uint64_t lost() const override { return queue_->lost(); }
 
  private:
+  Error failure(Errc code) const {
+    return {code, "source '" + hub_->name() + "': " +
+                      (code == Errc::stopped ? "the reader was stopped" : "no value before the deadline")};
+  }
+
   std::shared_ptr<Hub<T>> hub_;  // a reader keeps its source alive
   std::shared_ptr<Queue<T>> queue_;
 };

@@ -6,6 +6,7 @@
 #include <string>
 #include <string_view>
 #include <utility>
+#include <vector>
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/event.hpp"
@@ -68,15 +69,21 @@ void spawn_reader(const std::weak_ptr<RuntimeState>& runtime, Reader<T> reader, 
   if (!owner) throw Failure{{Errc::stopped, what + ": the core that owns the source is gone"}};
   owner->spawn([runtime, reader = std::move(reader), what = std::move(what),
                 on_sample = std::move(on_sample)](std::stop_token stop) mutable {
+    constexpr std::size_t kBatch = 64;  // values taken per wake-up when the source is busy
+    std::vector<Sample<T>> batch;
+    batch.reserve(kBatch);
     while (true) {
-      auto sample = reader.read_until(Clock::time_point::max(), stop);
-      if (!sample) return;  // with no deadline, only a stop ends the wait
-      try {
-        on_sample(std::move(*sample), stop);
-      } catch (const std::exception& e) {
-        if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": " + e.what()});
-      } catch (...) {
-        if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": an exception of unknown type"});
+      batch.clear();
+      if (!reader.read_some(batch, kBatch, Clock::time_point::max(), stop)) return;  // only a stop ends it
+      for (auto& sample : batch) {
+        if (stop.stop_requested()) return;
+        try {
+          on_sample(std::move(sample), stop);
+        } catch (const std::exception& e) {
+          if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": " + e.what()});
+        } catch (...) {
+          if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": an exception of unknown type"});
+        }
       }
     }
   });

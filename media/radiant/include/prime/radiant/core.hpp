@@ -1,6 +1,7 @@
 #pragma once
 
 #include <string>
+#include <type_traits>
 #include <utility>
 
 #include "prime/logic/block.hpp"
@@ -22,6 +23,7 @@ class Core : public Runtime {
   [[nodiscard]] auto chain(F block, Graph graph) {
     using I = chain_input_t<In, F>;
     static_assert(Block<F, I>, "prime::radiant: a block must be callable as Out(In) and return a value");
+    static_assert(!std::is_member_pointer_v<F>, "prime::radiant: wrap a member function in a lambda");
     return Chain<I, F>{std::move(block), std::move(graph)};
   }
   template <class In = prime::detail::Deduce, class F>

@@ -37,7 +37,7 @@ class Queue {
     auto result = Pushed::delivered;
     if (size_ == slots_.size()) {
       if (overflow_ == Overflow::drop_oldest) {
-        take_front();
+        (void)take_front();
         ++lost_;
         result = Pushed::dropped_oldest;
       } else {
@@ -54,29 +54,38 @@ class Queue {
     }
     slots_[(head_ + size_) % slots_.size()].emplace(std::move(sample));
     ++size_;
-    if (waiting_readers_ > 0) not_empty_.notify_one();
+    const bool wake_reader = waiting_readers_ > 0;
+    lock.unlock();  // the woken reader should not find the lock still taken
+    if (wake_reader) not_empty_.notify_one();
     return result;
   }
 
   [[nodiscard]] std::optional<Sample<T>> try_pop() {
-    std::scoped_lock lock{mutex_};
+    std::unique_lock lock{mutex_};
     if (size_ == 0) return std::nullopt;
-    return take_front();
+    auto sample = take_front();
+    wake_writers(lock);
+    return sample;
   }
 
-  [[nodiscard]] std::expected<Sample<T>, Errc> pop_until(Clock::time_point deadline,
-                                                         std::stop_token stop) {
+  [[nodiscard]] std::expected<Sample<T>, Errc> pop_until(Clock::time_point deadline, std::stop_token stop) {
     std::unique_lock lock{mutex_};
-    if (size_ == 0) {
-      ++waiting_readers_;
-      const auto ready = [&] { return size_ > 0; };
-      const bool got = deadline == Clock::time_point::max()
-                           ? not_empty_.wait(lock, stop, ready)
-                           : not_empty_.wait_until(lock, stop, deadline, ready);
-      --waiting_readers_;
-      if (!got) return std::unexpected(stop.stop_requested() ? Errc::stopped : Errc::timeout);
-    }
-    return take_front();
+    if (auto waited = wait_for_value(lock, deadline, std::move(stop)); !waited) return std::unexpected(waited.error());
+    auto sample = take_front();
+    wake_writers(lock);
+    return sample;
+  }
+
+  // Waits for one value, then moves up to `max` into `out` under one lock, and
+  // wakes the waiting writers once for all of them.
+  [[nodiscard]] std::expected<std::size_t, Errc> pop_some(std::vector<Sample<T>>& out, std::size_t max,
+                                                          Clock::time_point deadline, std::stop_token stop) {
+    std::unique_lock lock{mutex_};
+    if (auto waited = wait_for_value(lock, deadline, std::move(stop)); !waited) return std::unexpected(waited.error());
+    std::size_t n = 0;
+    for (; n < max && size_ > 0; ++n) out.push_back(take_front());
+    wake_writers(lock);
+    return n;
   }
 
   // The reader is gone: writers stop waiting for it and drop what they bring.
@@ -98,8 +107,25 @@ class Queue {
     slot.reset();
     head_ = (head_ + 1) % slots_.size();
     --size_;
-    if (waiting_writers_ > 0) not_full_.notify_one();
     return sample;
+  }
+
+  std::expected<void, Errc> wait_for_value(std::unique_lock<std::mutex>& lock, Clock::time_point deadline,
+                                           std::stop_token stop) {
+    if (size_ > 0) return {};
+    ++waiting_readers_;
+    const auto ready = [&] { return size_ > 0; };
+    const bool got = deadline == Clock::time_point::max() ? not_empty_.wait(lock, stop, ready)
+                                                          : not_empty_.wait_until(lock, stop, deadline, ready);
+    --waiting_readers_;
+    if (!got) return std::unexpected(stop.stop_requested() ? Errc::stopped : Errc::timeout);
+    return {};
+  }
+
+  void wake_writers(std::unique_lock<std::mutex>& lock) {
+    const bool wake = waiting_writers_ > 0;
+    lock.unlock();
+    if (wake) not_full_.notify_all();
   }
 
   mutable std::mutex mutex_;
