@@ -66,8 +66,11 @@ template <auto F>
 struct Function {
   template <class In>
     requires std::invocable<decltype(F), In>
-  constexpr decltype(auto) operator()(In&& in) const {
-    return std::invoke(F, std::forward<In>(in));
+  [[gnu::always_inline]] constexpr decltype(auto) operator()(In&& in) const {
+    if constexpr (std::is_member_pointer_v<decltype(F)>)
+      return std::invoke(F, std::forward<In>(in));
+    else
+      return F(std::forward<In>(in));
   }
 };
 template <auto F>

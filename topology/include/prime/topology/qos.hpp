@@ -20,6 +20,10 @@ struct Qos {
   // up on that reader for this value (counted as lost and reported): a dead or
   // wedged reader must not stall a producer forever.
   std::chrono::milliseconds block_timeout{1000};
+  // How long a reader that finds its buffer empty keeps checking before it
+  // sleeps. A value due within microseconds then costs no wake-up call; an
+  // idle reader still sleeps and burns nothing. Zero: sleep at once.
+  std::chrono::microseconds spin{20};
 };
 
 }  // namespace prime

@@ -1,5 +1,7 @@
 #pragma once
 
+#include <algorithm>
+#include <atomic>
 #include <cassert>
 #include <condition_variable>
 #include <cstdint>
@@ -15,6 +17,12 @@
 
 namespace prime::detail {
 
+inline void cpu_relax() noexcept {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#endif
+}
+
 // One reader's bounded buffer: a ring of `capacity` slots that never grows.
 // Many writers (every producer of the source), one reader.
 //
@@ -27,7 +35,7 @@ class Queue {
   enum class Pushed { delivered, dropped_oldest, timed_out, stopped, closed };
 
   explicit Queue(const Qos& qos)
-      : slots_(qos.capacity), overflow_{qos.overflow}, block_timeout_{qos.block_timeout} {
+      : slots_(qos.capacity), overflow_{qos.overflow}, block_timeout_{qos.block_timeout}, spin_{qos.spin} {
     assert(qos.capacity > 0);
   }
 
@@ -113,6 +121,13 @@ class Queue {
   std::expected<void, Errc> wait_for_value(std::unique_lock<std::mutex>& lock, Clock::time_point deadline,
                                            std::stop_token stop) {
     if (size_ > 0) return {};
+    if (spin_.count() > 0) {
+      lock.unlock();
+      const auto until = std::min(deadline, Clock::now() + spin_);
+      while (size_.load(std::memory_order_relaxed) == 0 && !stop.stop_requested() && Clock::now() < until) cpu_relax();
+      lock.lock();
+      if (size_ > 0) return {};
+    }
     ++waiting_readers_;
     const auto ready = [&] { return size_ > 0; };
     const bool got = deadline == Clock::time_point::max() ? not_empty_.wait(lock, stop, ready)
@@ -133,13 +148,14 @@ class Queue {
   std::condition_variable_any not_full_;
   std::vector<std::optional<Sample<T>>> slots_;
   std::size_t head_ = 0;
-  std::size_t size_ = 0;
+  std::atomic<std::size_t> size_ = 0;  // written under the lock; read without it only to spin
   std::uint64_t lost_ = 0;
   int waiting_readers_ = 0;
   int waiting_writers_ = 0;
   bool closed_ = false;
   const Overflow overflow_;
   const std::chrono::milliseconds block_timeout_;
+  const std::chrono::microseconds spin_;
 };
 
 }  // namespace prime::detail
