@@ -4,9 +4,10 @@
 #include <atomic>
 #include <cstdint>
 #include <initializer_list>
-#include <map>
+#include <functional>
 #include <sstream>
 #include <string>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -105,14 +106,22 @@ class Graph {
   }
 
  private:
+  // Linear in the size of both graphs, so a chain of n links builds in O(n^2).
   void absorb(const Graph& other) {
+    std::unordered_set<std::uint64_t> known;
+    for (const auto& n : nodes_) known.insert(n.id);
     for (const auto& n : other.nodes_)
-      if (!find(n.id)) nodes_.push_back(n);
-    for (const auto& e : other.edges_) add_edge(e);
+      if (known.insert(n.id).second) nodes_.push_back(n);
+    std::unordered_set<Edge, EdgeHash> edges(edges_.begin(), edges_.end());
+    for (const auto& e : other.edges_)
+      if (edges.insert(e).second) edges_.push_back(e);
   }
   void add_edge(Edge e) {
     if (std::ranges::find(edges_, e) == edges_.end()) edges_.push_back(e);
   }
+  struct EdgeHash {
+    std::size_t operator()(const Edge& e) const noexcept { return std::hash<std::uint64_t>{}(e.from * 0x9E3779B97F4A7C15ull ^ e.to); }
+  };
   static void append_unique(std::vector<std::uint64_t>& to, const std::vector<std::uint64_t>& from) {
     for (auto id : from)
       if (std::ranges::find(to, id) == to.end()) to.push_back(id);

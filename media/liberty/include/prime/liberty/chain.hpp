@@ -2,7 +2,9 @@
 
 #include <functional>
 #include <memory>
+#include <type_traits>
 #include <utility>
+#include <vector>
 
 #include "prime/topology/concepts.hpp"
 #include "prime/topology/graph.hpp"
@@ -13,8 +15,8 @@ namespace prime::liberty {
 namespace detail {
 
 // The one type-erased piece: a step from In to Out, shared by every chain
-// that contains it. A linked pair is itself a step, so linking never copies
-// what it links and a chain is built at run time, from a config say.
+// that contains it. Linked steps are themselves a step, so linking never
+// copies a block and a chain is built at run time, from a config say.
 template <class In, class Out>
 class Step {
  public:
@@ -44,6 +46,44 @@ class LinkedStep final : public Step<In, Out> {
   std::shared_ptr<const Step<Mid, Out>> second_;
 };
 
+// Steps that all take and give T, held flat: one indirect call per step and
+// no recursion, however long a chain grows at run time.
+template <class T>
+class SequenceStep final : public Step<T, T> {
+ public:
+  using Steps = std::vector<std::shared_ptr<const Step<T, T>>>;
+
+  explicit SequenceStep(Steps steps) : steps_{std::move(steps)} {}
+  T operator()(T value) const override {
+    for (const auto& step : steps_) value = (*step)(std::move(value));
+    return value;
+  }
+
+  // The steps of `step`, looking inside a sequence rather than nesting it.
+  static void append(Steps& to, const std::shared_ptr<const Step<T, T>>& step) {
+    if (auto sequence = std::dynamic_pointer_cast<const SequenceStep>(step))
+      to.insert(to.end(), sequence->steps_.begin(), sequence->steps_.end());
+    else
+      to.push_back(step);
+  }
+
+ private:
+  Steps steps_;
+};
+
+template <class In, class Mid, class Out>
+std::shared_ptr<const Step<In, Out>> linked(std::shared_ptr<const Step<In, Mid>> first,
+                                            std::shared_ptr<const Step<Mid, Out>> second) {
+  if constexpr (std::is_same_v<In, Mid> && std::is_same_v<Mid, Out> && std::is_move_assignable_v<In>) {
+    typename SequenceStep<In>::Steps steps;
+    SequenceStep<In>::append(steps, first);
+    SequenceStep<In>::append(steps, second);
+    return std::make_shared<const SequenceStep<In>>(std::move(steps));
+  } else {
+    return std::make_shared<const LinkedStep<In, Mid, Out>>(std::move(first), std::move(second));
+  }
+}
+
 }  // namespace detail
 
 // A chain whose type says only what goes in and what comes out: one indirect
@@ -72,8 +112,7 @@ static_assert(prime::Chain<Chain<int, double>>);
 
 template <class In, class Mid, class Out>
 [[nodiscard]] Chain<In, Out> link(const Chain<In, Mid>& first, const Chain<Mid, Out>& second) {
-  return {std::make_shared<const detail::LinkedStep<In, Mid, Out>>(first.step(), second.step()),
-          Graph::sequence(first.graph(), second.graph())};
+  return {detail::linked<In, Mid, Out>(first.step(), second.step()), Graph::sequence(first.graph(), second.graph())};
 }
 
 using prime::operator|;
