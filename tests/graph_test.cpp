@@ -23,6 +23,7 @@ TEST(GraphTest, SharedPartsAppearOnce) {
   auto right = Graph::sequence(source, Graph::node("log", "chain", "liberty"));
   auto joined = Graph::sequence(Graph::parallel({&left, &right}), Graph::node("sync", "sync", "liberty"));
   EXPECT_EQ(joined.nodes().size(), 4u) << joined.text();
+  EXPECT_EQ(joined.entries().size(), 1u) << "the shared source is one entry";
   EXPECT_EQ(joined.edges().size(), 4u) << joined.text();
 }
 
@@ -32,6 +33,20 @@ TEST(GraphTest, RepeatedNamesAreToldApart) {
   const auto text = Graph::sequence(a, b).text();
   EXPECT_NE(text.find("step#" + std::to_string(a.nodes()[0].id)), std::string::npos) << text;
   EXPECT_NE(text.find("step#" + std::to_string(b.nodes()[0].id)), std::string::npos) << text;
+}
+
+TEST(GraphTest, LinkingIsCheapAndDescribingALongChainDoesNotRecurse) {
+  Graph chain = Graph::node("step", "chain", "liberty");
+  for (int i = 1; i < 100'000; ++i) chain = Graph::sequence(chain, Graph::node("step", "chain", "liberty"));
+  EXPECT_EQ(chain.nodes().size(), 100'000u);
+  EXPECT_EQ(chain.edges().size(), 99'999u);
+}
+
+TEST(GraphTest, TheEmptyGraphJoinsToNothing) {
+  auto a = Graph::node("a", "chain", "liberty");
+  EXPECT_EQ(Graph::sequence(Graph{}, a).text(), a.text());
+  EXPECT_EQ(Graph::sequence(a, Graph{}).text(), a.text());
+  EXPECT_EQ(Graph{}.text(), "");
 }
 
 TEST(GraphTest, LoneNodesAreListed) { EXPECT_EQ(Graph::node("x", "source", "m").text(), "x [source, m]\n"); }

@@ -76,10 +76,7 @@ struct chain_input<Deduce, F> {
 // "a | b": the names of the nodes a graph's data leaves through.
 inline std::string exit_names(const Graph& graph) {
   std::string names;
-  for (auto id : graph.exits()) {
-    for (const auto& node : graph.nodes())
-      if (node.id == id) names += (names.empty() ? "" : ", ") + node.name;
-  }
+  for (const auto& node : graph.exits()) names.append(names.empty() ? "" : ", ").append(node.name);
   return names;
 }
 

@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdint>
-#include <initializer_list>
 #include <functional>
+#include <initializer_list>
+#include <memory>
 #include <sstream>
 #include <string>
+#include <unordered_map>
 #include <unordered_set>
 #include <utility>
 #include <vector>
@@ -16,6 +18,10 @@ namespace prime {
 // What a topology is made of, for people: every chain, source and combinator
 // carries the graph of what it was built from, and prints it as text or as
 // Graphviz DOT. Built while linking, never touched on the data path.
+//
+// Graphs share their parts, so linking costs the same however large the two
+// sides are; the list of nodes and edges is worked out only when asked for.
+// Immutable, so thread-safe.
 class Graph {
  public:
   struct Node {
@@ -23,6 +29,7 @@ class Graph {
     std::string name;
     std::string kind;    // "chain", "source", "collector", "sync", ...
     std::string medium;  // "liberty", "radiant", ...
+    friend bool operator==(const Node&, const Node&) = default;
   };
   struct Edge {
     std::uint64_t from;
@@ -30,113 +37,160 @@ class Graph {
     friend bool operator==(const Edge&, const Edge&) = default;
   };
 
-  Graph() = default;
+  Graph() = default;  // empty: no node, joins to nothing
 
   // One node that is both where data enters and where it leaves.
   static Graph node(std::string name, std::string kind, std::string medium) {
     static std::atomic<std::uint64_t> next_id{1};
-    Graph g;
-    const auto id = next_id.fetch_add(1, std::memory_order_relaxed);
-    g.nodes_.push_back({id, std::move(name), std::move(kind), std::move(medium)});
-    g.entries_ = {id};
-    g.exits_ = {id};
-    return g;
+    Node n{next_id.fetch_add(1, std::memory_order_relaxed), std::move(name), std::move(kind), std::move(medium)};
+    return Graph{std::make_shared<const Part>(Part{Part::Kind::node, {}, {n}, {n}})};
   }
 
   // `first` feeds `second`: every exit of one is joined to every entry of the other.
   static Graph sequence(const Graph& first, const Graph& second) {
-    Graph g = first;
-    g.absorb(second);
-    for (auto from : first.exits_)
-      for (auto to : second.entries_) g.add_edge({from, to});
-    g.entries_ = first.entries_;
-    g.exits_ = second.exits_;
-    return g;
+    if (!first.root_) return second;
+    if (!second.root_) return first;
+    return Graph{std::make_shared<const Part>(
+        Part{Part::Kind::sequence, {first.root_, second.root_}, first.entries(), second.exits()})};
   }
 
   // Side by side: data may enter or leave through any of the parts.
   static Graph parallel(std::initializer_list<const Graph*> parts) {
-    Graph g;
+    Part joined{Part::Kind::parallel, {}, {}, {}};
     for (const Graph* part : parts) {
-      g.absorb(*part);
-      append_unique(g.entries_, part->entries_);
-      append_unique(g.exits_, part->exits_);
+      if (!part->root_) continue;
+      joined.parts.push_back(part->root_);
+      append_unique(joined.entries, part->entries());
+      append_unique(joined.exits, part->exits());
     }
-    return g;
+    return Graph{std::make_shared<const Part>(std::move(joined))};
   }
 
   // An edge back from this graph's exits to `target`'s entries (a loop).
   [[nodiscard]] Graph looping_back_to(const Graph& target) const {
-    Graph g = *this;
-    for (auto from : exits_)
-      for (auto to : target.entries_) g.add_edge({from, to});
-    return g;
+    if (!root_ || !target.root_) return *this;
+    return Graph{std::make_shared<const Part>(Part{Part::Kind::loop, {root_, target.root_}, entries(), exits()})};
   }
 
-  [[nodiscard]] const std::vector<Node>& nodes() const noexcept { return nodes_; }
-  [[nodiscard]] const std::vector<Edge>& edges() const noexcept { return edges_; }
-  [[nodiscard]] const std::vector<std::uint64_t>& entries() const noexcept { return entries_; }
-  [[nodiscard]] const std::vector<std::uint64_t>& exits() const noexcept { return exits_; }
+  [[nodiscard]] const std::vector<Node>& entries() const noexcept { return root_ ? root_->entries : none(); }
+  [[nodiscard]] const std::vector<Node>& exits() const noexcept { return root_ ? root_->exits : none(); }
+  [[nodiscard]] std::vector<Node> nodes() const { return flatten().nodes; }
+  [[nodiscard]] std::vector<Edge> edges() const { return flatten().edges; }
 
   // "lidar [source, liberty] -> localize [chain, radiant]", one edge a line,
   // then any node that has no edge. Names that repeat get a "#id" suffix.
   [[nodiscard]] std::string text() const {
+    const Flat flat = flatten();
+    const auto label = labeller(flat);
     std::ostringstream out;
-    std::vector<std::uint64_t> linked;
-    for (const auto& e : edges_) {
+    std::unordered_set<std::uint64_t> linked;
+    for (const auto& e : flat.edges) {
       out << label(e.from) << " -> " << label(e.to) << '\n';
-      linked.push_back(e.from);
-      linked.push_back(e.to);
+      linked.insert(e.from);
+      linked.insert(e.to);
     }
-    for (const auto& n : nodes_)
-      if (std::ranges::find(linked, n.id) == linked.end()) out << label(n.id) << '\n';
+    for (const auto& n : flat.nodes)
+      if (!linked.contains(n.id)) out << label(n.id) << '\n';
     return out.str();
   }
 
   [[nodiscard]] std::string dot() const {
+    const Flat flat = flatten();
     std::ostringstream out;
     out << "digraph prime {\n  rankdir=LR;\n";
-    for (const auto& n : nodes_) {
+    for (const auto& n : flat.nodes) {
       out << "  n" << n.id << " [label=\"" << escaped(n.name) << "\\n" << escaped(n.kind) << ", "
           << escaped(n.medium) << "\", shape=" << shape(n.kind) << "];\n";
     }
-    for (const auto& e : edges_) out << "  n" << e.from << " -> n" << e.to << ";\n";
+    for (const auto& e : flat.edges) out << "  n" << e.from << " -> n" << e.to << ";\n";
     out << "}\n";
     return out.str();
   }
 
  private:
-  // Linear in the size of both graphs, so a chain of n links builds in O(n^2).
-  void absorb(const Graph& other) {
-    std::unordered_set<std::uint64_t> known;
-    for (const auto& n : nodes_) known.insert(n.id);
-    for (const auto& n : other.nodes_)
-      if (known.insert(n.id).second) nodes_.push_back(n);
-    std::unordered_set<Edge, EdgeHash> edges(edges_.begin(), edges_.end());
-    for (const auto& e : other.edges_)
-      if (edges.insert(e).second) edges_.push_back(e);
-  }
-  void add_edge(Edge e) {
-    if (std::ranges::find(edges_, e) == edges_.end()) edges_.push_back(e);
-  }
-  struct EdgeHash {
-    std::size_t operator()(const Edge& e) const noexcept { return std::hash<std::uint64_t>{}(e.from * 0x9E3779B97F4A7C15ull ^ e.to); }
+  struct Part {
+    enum class Kind { node, sequence, parallel, loop };
+    Kind kind;
+    std::vector<std::shared_ptr<const Part>> parts;  // sequence: {first, second}; loop: {body, target}
+    std::vector<Node> entries;
+    std::vector<Node> exits;
   };
-  static void append_unique(std::vector<std::uint64_t>& to, const std::vector<std::uint64_t>& from) {
-    for (auto id : from)
-      if (std::ranges::find(to, id) == to.end()) to.push_back(id);
+  struct Flat {
+    std::vector<Node> nodes;
+    std::vector<Edge> edges;
+  };
+  struct EdgeHash {
+    std::size_t operator()(const Edge& e) const noexcept {
+      return std::hash<std::uint64_t>{}(e.from * 0x9E3779B97F4A7C15ull ^ e.to);
+    }
+  };
+
+  explicit Graph(std::shared_ptr<const Part> root) : root_{std::move(root)} {}
+
+  static const std::vector<Node>& none() {
+    static const std::vector<Node> empty;
+    return empty;
   }
-  [[nodiscard]] const Node* find(std::uint64_t id) const {
-    auto it = std::ranges::find(nodes_, id, &Node::id);
-    return it == nodes_.end() ? nullptr : &*it;
+  static void append_unique(std::vector<Node>& to, const std::vector<Node>& from) {
+    for (const auto& n : from)
+      if (std::find(to.begin(), to.end(), n) == to.end()) to.push_back(n);
   }
-  [[nodiscard]] std::string label(std::uint64_t id) const {
-    const Node* n = find(id);
-    const auto same_name = std::ranges::count(nodes_, n->name, &Node::name);
-    std::string name = n->name;
-    if (same_name > 1) name.append("#").append(std::to_string(n->id));
-    return name + " [" + n->kind + ", " + n->medium + "]";
+
+  // Every node and edge once, parts before what joins them, walked without
+  // recursion: a chain linked at run time may be very long.
+  [[nodiscard]] Flat flatten() const {
+    Flat flat;
+    if (!root_) return flat;
+    std::unordered_set<std::uint64_t> nodes;
+    std::unordered_set<Edge, EdgeHash> edges;
+    std::unordered_set<const Part*> done;
+    const auto join = [&](const std::vector<Node>& from, const std::vector<Node>& to) {
+      for (const auto& f : from)
+        for (const auto& t : to)
+          if (edges.insert({f.id, t.id}).second) flat.edges.push_back({f.id, t.id});
+    };
+    struct Frame {
+      const Part* part;
+      std::size_t next_child;
+    };
+    std::vector<Frame> stack{{root_.get(), 0}};
+    while (!stack.empty()) {
+      Frame& top = stack.back();
+      if (top.next_child < top.part->parts.size()) {
+        const Part* child = top.part->parts[top.next_child++].get();
+        if (!done.contains(child)) stack.push_back({child, 0});
+        continue;
+      }
+      const Part& part = *top.part;
+      stack.pop_back();
+      if (!done.insert(&part).second) continue;
+      switch (part.kind) {
+        case Part::Kind::node:
+          if (nodes.insert(part.entries.front().id).second) flat.nodes.push_back(part.entries.front());
+          break;
+        case Part::Kind::sequence:
+        case Part::Kind::loop: join(part.parts[0]->exits, part.parts[1]->entries); break;
+        case Part::Kind::parallel: break;
+      }
+    }
+    return flat;
   }
+
+  static std::function<std::string(std::uint64_t)> labeller(const Flat& flat) {
+    std::unordered_map<std::string, int> uses;
+    std::unordered_map<std::uint64_t, const Node*> by_id;
+    for (const auto& n : flat.nodes) {
+      ++uses[n.name];
+      by_id[n.id] = &n;
+    }
+    return [uses = std::move(uses), by_id = std::move(by_id)](std::uint64_t id) {
+      const Node& n = *by_id.at(id);
+      std::string label = n.name;
+      if (uses.at(n.name) > 1) label.append("#").append(std::to_string(n.id));
+      return label.append(" [").append(n.kind).append(", ").append(n.medium).append("]");
+    };
+  }
+
   static std::string escaped(const std::string& s) {
     std::string r;
     for (char c : s) {
@@ -151,10 +205,7 @@ class Graph {
     return "box";
   }
 
-  std::vector<Node> nodes_;
-  std::vector<Edge> edges_;
-  std::vector<std::uint64_t> entries_;
-  std::vector<std::uint64_t> exits_;
+  std::shared_ptr<const Part> root_;
 };
 
 }  // namespace prime
