@@ -12,8 +12,10 @@
 
 namespace prime {
 
+namespace detail {
 template <class...>
 inline constexpr bool always_false = false;
+}  // namespace detail
 
 // The generic link: any chain after any chain, whatever their media. Media
 // give `link` overloads of their own for chains of their kind; this one is
@@ -47,7 +49,7 @@ template <Chain A, Chain B>
 template <Chain A, Chain B>
 [[nodiscard]] auto operator|(A first, B second) {
   if constexpr (!std::convertible_to<typename A::output_type, typename B::input_type>) {
-    static_assert(always_false<A, B>,
+    static_assert(detail::always_false<A, B>,
                   "prime: cannot link these chains: the first chain's output_type does not "
                   "convert to the second chain's input_type");
   } else {
@@ -64,7 +66,7 @@ template <Source S, Chain C>
 [[nodiscard]] auto operator|(S source, C chain) {
   using In = typename S::value_type;
   if constexpr (!std::convertible_to<In, typename C::input_type>) {
-    static_assert(always_false<S, C>,
+    static_assert(detail::always_false<S, C>,
                   "prime: cannot link this chain to this source: the source's value_type does "
                   "not convert to the chain's input_type");
   } else {
