@@ -2,6 +2,7 @@
 // overflow policies. Run under ThreadSanitizer too (preset "tsan").
 #include <gtest/gtest.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <map>
@@ -138,6 +139,34 @@ TEST(SourceStress, ReadersComeAndGoWhileProducersRun) {
   stop = true;
   churn.join();
   SUCCEED() << "no crash, no hang, nothing for the sanitizers";
+}
+
+TEST(SourceStress, SyncMatchesEveryStampWhileItsInputsArriveConcurrently) {
+  constexpr int kValues = 2000;
+  liberty::Core core;
+  const Qos lossless{.capacity = 64, .overflow = Overflow::block, .block_timeout = 60s};
+  std::array<Event<int>, 3> events;
+  auto a = core.source(events[0], "a", lossless);
+  auto b = core.source(events[1], "b", lossless);
+  auto c = core.source(events[2], "c", lossless);
+  SyncPolicy policy = exact_time;
+  policy.depth = kValues;  // room to wait for the slowest input: nothing is dropped
+  auto triples = sync(policy, a, b, c).subscribe();
+  const auto t0 = Clock::now();
+  {
+    std::vector<std::jthread> producers;
+    for (auto& event : events)
+      producers.emplace_back([&event, t0] {
+        for (int i = 0; i < kValues; ++i) event.emit(i, t0 + std::chrono::microseconds{i});
+      });
+    for (int i = 0; i < kValues; ++i) {
+      auto triple = triples.read_for(30s);
+      ASSERT_TRUE(triple) << "triple " << i << ": " << triple.error().describe();
+      EXPECT_EQ(triple->value, std::make_tuple(i, i, i));
+      EXPECT_EQ(triple->stamp, t0 + std::chrono::microseconds{i});
+    }
+  }
+  EXPECT_EQ(triples.lost(), 0u);
 }
 
 TEST(SourceStress, CoreDestroyedWhileProducersEmit) {
