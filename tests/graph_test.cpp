@@ -35,7 +35,7 @@ TEST(GraphTest, RepeatedNamesAreToldApart) {
   EXPECT_NE(text.find("step#" + std::to_string(b.nodes()[0].id)), std::string::npos) << text;
 }
 
-TEST(GraphTest, LinkingIsCheapAndDescribingALongChainDoesNotRecurse) {
+TEST(GraphTest, ALongChainIsDescribedAndReleasedWithoutRecursion) {
   Graph chain = Graph::node("step", "chain", "liberty");
   for (int i = 1; i < 100'000; ++i) chain = Graph::sequence(chain, Graph::node("step", "chain", "liberty"));
   EXPECT_EQ(chain.nodes().size(), 100'000u);

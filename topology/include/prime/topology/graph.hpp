@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <functional>
 #include <initializer_list>
+#include <iterator>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -43,33 +44,33 @@ class Graph {
   static Graph node(std::string name, std::string kind, std::string medium) {
     static std::atomic<std::uint64_t> next_id{1};
     Node n{next_id.fetch_add(1, std::memory_order_relaxed), std::move(name), std::move(kind), std::move(medium)};
-    return Graph{std::make_shared<const Part>(Part{Part::Kind::node, {}, {n}, {n}})};
+    return make(Part::Kind::node, {}, {n}, {n});
   }
 
   // `first` feeds `second`: every exit of one is joined to every entry of the other.
   static Graph sequence(const Graph& first, const Graph& second) {
     if (!first.root_) return second;
     if (!second.root_) return first;
-    return Graph{std::make_shared<const Part>(
-        Part{Part::Kind::sequence, {first.root_, second.root_}, first.entries(), second.exits()})};
+    return make(Part::Kind::sequence, {first.root_, second.root_}, first.entries(), second.exits());
   }
 
   // Side by side: data may enter or leave through any of the parts.
   static Graph parallel(std::initializer_list<const Graph*> parts) {
-    Part joined{Part::Kind::parallel, {}, {}, {}};
+    std::vector<std::shared_ptr<const Part>> joined;
+    std::vector<Node> entries, exits;
     for (const Graph* part : parts) {
       if (!part->root_) continue;
-      joined.parts.push_back(part->root_);
-      append_unique(joined.entries, part->entries());
-      append_unique(joined.exits, part->exits());
+      joined.push_back(part->root_);
+      append_unique(entries, part->entries());
+      append_unique(exits, part->exits());
     }
-    return Graph{std::make_shared<const Part>(std::move(joined))};
+    return make(Part::Kind::parallel, std::move(joined), std::move(entries), std::move(exits));
   }
 
   // An edge back from this graph's exits to `target`'s entries (a loop).
   [[nodiscard]] Graph looping_back_to(const Graph& target) const {
     if (!root_ || !target.root_) return *this;
-    return Graph{std::make_shared<const Part>(Part{Part::Kind::loop, {root_, target.root_}, entries(), exits()})};
+    return make(Part::Kind::loop, {root_, target.root_}, entries(), exits());
   }
 
   [[nodiscard]] const std::vector<Node>& entries() const noexcept { return root_ ? root_->entries : none(); }
@@ -114,6 +115,26 @@ class Graph {
     std::vector<std::shared_ptr<const Part>> parts;  // sequence: {first, second}; loop: {body, target}
     std::vector<Node> entries;
     std::vector<Node> exits;
+
+    Part(Kind k, std::vector<std::shared_ptr<const Part>> p, std::vector<Node> in, std::vector<Node> out)
+        : kind{k}, parts{std::move(p)}, entries{std::move(in)}, exits{std::move(out)} {}
+    Part(const Part&) = delete;
+    Part& operator=(const Part&) = delete;
+
+    // Releases a long chain of parts without recursing once per part: a part
+    // this one owns alone hands its own parts over before it goes.
+    ~Part() {
+      auto pending = std::move(parts);
+      while (!pending.empty()) {
+        auto part = std::move(pending.back());
+        pending.pop_back();
+        if (part.use_count() == 1) {  // the last owner: no other thread can reach it
+          auto& children = const_cast<Part&>(*part).parts;  // made non-const by make()
+          std::move(children.begin(), children.end(), std::back_inserter(pending));
+          children.clear();
+        }
+      }
+    }
   };
   struct Flat {
     std::vector<Node> nodes;
@@ -126,6 +147,10 @@ class Graph {
   };
 
   explicit Graph(std::shared_ptr<const Part> root) : root_{std::move(root)} {}
+  static Graph make(Part::Kind kind, std::vector<std::shared_ptr<const Part>> parts, std::vector<Node> entries,
+                    std::vector<Node> exits) {
+    return Graph{std::make_shared<Part>(kind, std::move(parts), std::move(entries), std::move(exits))};
+  }
 
   static const std::vector<Node>& none() {
     static const std::vector<Node> empty;
