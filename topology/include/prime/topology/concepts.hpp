@@ -73,13 +73,6 @@ struct chain_input<Deduce, F> {
   using type = block_input_t<F>;
 };
 
-// "a | b": the names of the nodes a graph's data leaves through.
-inline std::string exit_names(const Graph& graph) {
-  std::string names;
-  for (const auto& node : graph.exits()) names.append(names.empty() ? "" : ", ").append(node.name);
-  return names;
-}
-
 }  // namespace detail
 
 template <class In, class F>

@@ -3,6 +3,7 @@
 #include <concepts>
 #include <memory>
 #include <stop_token>
+#include <string>
 #include <utility>
 
 #include "prime/topology/concepts.hpp"
@@ -13,8 +14,17 @@
 namespace prime {
 
 namespace detail {
+
 template <class...>
 inline constexpr bool always_false = false;
+
+// The names of the nodes a graph's data leaves through: "lidar | localize".
+inline std::string exit_names(const Graph& graph) {
+  std::string names;
+  for (const auto& node : graph.exits()) names.append(names.empty() ? "" : ", ").append(node.name);
+  return names;
+}
+
 }  // namespace detail
 
 // The generic link: any chain after any chain, whatever their media. Media

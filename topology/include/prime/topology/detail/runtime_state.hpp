@@ -1,6 +1,5 @@
 #pragma once
 
-#include <atomic>
 #include <functional>
 #include <iostream>
 #include <mutex>
@@ -38,7 +37,6 @@ class RuntimeState {
   // Goes to every subscriber of the core's error source; with none, to stderr,
   // so an error is never lost in silence.
   void report(Error error) {
-    reported_.fetch_add(1, std::memory_order_relaxed);
     if (errors_.listener_count() == 0) {
       std::cerr << "prime [" << medium_ << "] " << error.describe() << '\n';
       return;
@@ -47,7 +45,6 @@ class RuntimeState {
   }
 
   [[nodiscard]] Event<Error>& errors() noexcept { return errors_; }
-  [[nodiscard]] std::uint64_t reported() const noexcept { return reported_.load(std::memory_order_relaxed); }
 
   // Stops every worker and joins it. Idempotent; must not be called from a worker.
   void stop() {
@@ -67,7 +64,6 @@ class RuntimeState {
   bool stopping_ = false;
   std::vector<std::jthread> workers_;
   Event<Error> errors_;
-  std::atomic<std::uint64_t> reported_{0};
 };
 
 }  // namespace prime::detail
