@@ -24,8 +24,8 @@ struct Tagged {
 constexpr int kProducers = 4;
 constexpr int kPerProducer = 5000;
 
-// Reads until `expected` values arrived or nothing came for a while; checks
-// that each producer's values arrive in order and never twice.
+// Counts what a reader received, checking that each producer's values arrive
+// in order and never twice.
 struct Tally {
   std::map<int, int> last_seq;
   std::size_t received = 0;
@@ -36,6 +36,18 @@ struct Tally {
     if (t.seq <= it->second) in_order = false;
     it->second = t.seq;
     ++received;
+  }
+
+  // Reads `expected` values, pausing 1 ms after every `pause_every` (0: never),
+  // and stops early if one takes longer than 30 s.
+  template <class R>
+  void read(R& reader, int expected, int pause_every = 0) {
+    for (int n = 0; n < expected; ++n) {
+      auto s = reader.read_for(30s);
+      if (!s) return;
+      take(s->value);
+      if (pause_every > 0 && n % pause_every == 0) std::this_thread::sleep_for(1ms);
+    }
   }
 };
 
@@ -80,14 +92,7 @@ TEST(SourceStress, BlockUnderManyProducersDeliversEverythingInOrder) {
   auto source = core.source(event, "tagged", {.capacity = 16, .overflow = Overflow::block, .block_timeout = 60s});
   auto reader = source.subscribe();
   Tally tally;
-  std::jthread consumer{[&] {
-    for (int n = 0; n < kProducers * kPerProducer; ++n) {
-      auto s = reader.read_for(30s);
-      if (!s) return;
-      tally.take(s->value);
-      if (n % 256 == 0) std::this_thread::sleep_for(1ms);  // a slow reader
-    }
-  }};
+  std::jthread consumer{[&] { tally.read(reader, kProducers * kPerProducer, 256); }};  // a slow reader
   produce(event);
   consumer.join();
   EXPECT_TRUE(tally.in_order);
@@ -102,13 +107,7 @@ TEST(SourceStress, ASlowLossyReaderDoesNotHoldBackALosslessOne) {
   auto lossless = (source | core.chain([](Tagged t) { return t; })).subscribe();
   auto lossy = source.subscribe({.capacity = 4, .overflow = Overflow::drop_oldest});
   Tally tally;
-  std::jthread consumer{[&] {
-    for (int n = 0; n < kProducers * kPerProducer; ++n) {
-      auto s = lossless.read_for(30s);
-      if (!s) return;
-      tally.take(s->value);
-    }
-  }};
+  std::jthread consumer{[&] { tally.read(lossless, kProducers * kPerProducer); }};
   produce(event);
   consumer.join();
   EXPECT_EQ(tally.received, std::size_t{kProducers * kPerProducer});

@@ -87,7 +87,8 @@ std::shared_ptr<const Step<In, Out>> linked(std::shared_ptr<const Step<In, Mid>>
 }  // namespace detail
 
 // A chain whose type says only what goes in and what comes out: one indirect
-// call per block. Copies share the block.
+// call per block, where the blocks all take and give one type; two where the
+// type changes from block to block. Copies share the blocks.
 //
 // Thread-safe to call from several threads when the blocks are.
 template <class In, class Out>
