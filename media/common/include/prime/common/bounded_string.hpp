@@ -1,0 +1,56 @@
+#pragma once
+
+#include <algorithm>
+#include <compare>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "prime/logic/error.hpp"
+
+namespace prime {
+
+// Text of at most N characters stored inline, so a message that holds it
+// stays trivially copyable and can live in shared memory or travel as bytes.
+// Always NUL-terminated.
+template <std::size_t N>
+class bounded_string {
+  static_assert(N > 0 && N < UINT32_MAX, "bounded_string: capacity must be in [1, 2^32)");
+
+ public:
+  constexpr bounded_string() noexcept = default;
+  // Throws Failure{limit_exceeded} when `text` is longer than N.
+  constexpr bounded_string(std::string_view text) { assign(text); }  // NOLINT: converts like std::string
+
+  constexpr void assign(std::string_view text) {
+    if (text.size() > N)
+      throw Failure{{Errc::limit_exceeded, "bounded_string<" + std::to_string(N) + ">: text of " +
+                                               std::to_string(text.size()) + " characters does not fit"}};
+    std::copy(text.begin(), text.end(), data_);
+    size_ = static_cast<std::uint32_t>(text.size());
+    data_[size_] = '\0';
+  }
+
+  [[nodiscard]] constexpr std::string_view view() const noexcept { return {data_, size_}; }
+  [[nodiscard]] constexpr const char* c_str() const noexcept { return data_; }
+  [[nodiscard]] constexpr std::size_t size() const noexcept { return size_; }
+  [[nodiscard]] constexpr bool empty() const noexcept { return size_ == 0; }
+  [[nodiscard]] static constexpr std::size_t capacity() noexcept { return N; }
+  [[nodiscard]] std::string str() const { return std::string{view()}; }
+  constexpr operator std::string_view() const noexcept { return view(); }  // NOLINT
+
+  friend constexpr bool operator==(const bounded_string& a, const bounded_string& b) noexcept {
+    return a.view() == b.view();
+  }
+  friend constexpr bool operator==(const bounded_string& a, std::string_view b) noexcept { return a.view() == b; }
+  friend constexpr auto operator<=>(const bounded_string& a, const bounded_string& b) noexcept {
+    return a.view() <=> b.view();
+  }
+
+ private:
+  std::uint32_t size_ = 0;
+  char data_[N + 1]{};
+};
+
+}  // namespace prime
