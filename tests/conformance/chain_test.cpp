@@ -42,11 +42,8 @@ TYPED_TEST(ChainTest, LinkedChainsAreOfTheMediumsOwnKind) {
   auto& core = *this->core;
   using One = decltype(core.chain(twice));
   using Two = decltype(core.chain(twice) | core.chain(twice));
-  if constexpr (std::same_as<TypeParam, liberty::Core>) {
-    static_assert(std::same_as<One, Two>, "liberty: linking keeps the erased type");
-  } else {
-    static_assert(!std::same_as<Two, Linked<One, One>>, "a medium links its own chains, not the generic link");
-  }
+  static_assert(!std::same_as<Two, Linked<One, One>>, "a medium links its own chains, not the generic link");
+  if constexpr (std::same_as<TypeParam, liberty::Core>) static_assert(std::same_as<One, Two>, "liberty: linking keeps the erased type");
   SUCCEED();
 }
 

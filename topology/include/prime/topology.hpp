@@ -4,6 +4,7 @@
 // work the same over every medium.
 #include "prime/topology/collector.hpp"
 #include "prime/topology/concepts.hpp"
+#include "prime/topology/erased_chain.hpp"
 #include "prime/topology/foreach.hpp"
 #include "prime/topology/fork.hpp"
 #include "prime/topology/graph.hpp"
