@@ -7,13 +7,14 @@
 
 #include "prime/liberty.hpp"
 #include "prime/radiant.hpp"
+#include "prime/shm.hpp"
 
 namespace prime::test {
 
 // Every medium the conformance suite runs on. A medium joins with one entry
 // here (and, if it needs constructor arguments or carries sources its own way,
 // a specialisation of Harness below).
-using Media = ::testing::Types<liberty::Core, radiant::Core>;
+using Media = ::testing::Types<liberty::Core, radiant::Core, shm::Core>;
 
 // How the suite makes a core, and a source it can publish into, on a medium.
 // The default serves in-process media: an Event feeding core.source().
@@ -58,3 +59,5 @@ class MediumName {
 };
 
 }  // namespace prime::test
+
+#include "conformance/shm_harness.hpp"

@@ -151,13 +151,17 @@ TYPED_TEST(SourceTest, BlockGivesUpOnAStuckReaderAtTheTimeoutAndReportsIt) {
       "cmds", {.capacity = 1, .overflow = Overflow::block, .block_timeout = std::chrono::milliseconds{20}});
   auto stuck = cmds.source.subscribe();
   cmds.emit(1);
-  cmds.emit(2);  // no room: waits 20 ms, then drops it for this reader
-  EXPECT_EQ(stuck.lost(), 1u);
+  cmds.emit(2);  // no room: waits 20 ms, then gives up on this reader for one value
   auto report = errors.read_for(kPatience);
   ASSERT_TRUE(report);
   EXPECT_EQ(report->value.code, Errc::overflow);
   EXPECT_NE(report->value.message.find("cmds"), std::string::npos);
-  EXPECT_EQ(stuck.try_read()->value, 1);
+  // Which value the stuck reader loses is the medium's: an in-process buffer
+  // refuses the new one, a shared ring overwrites the oldest.
+  auto kept = stuck.read_all();
+  ASSERT_EQ(kept.size(), 1u);
+  EXPECT_TRUE(kept[0].value == 1 || kept[0].value == 2);
+  EXPECT_EQ(stuck.lost(), 1u);
 }
 
 TYPED_TEST(SourceTest, ALinkedChainRunsInAWorkerAndKeepsTheStamp) {
@@ -237,7 +241,8 @@ TYPED_TEST(SourceTest, CollectorOfAllUnreadGivesEachValueOnce) {
   auto unread = collector(core, odom.source, all_unread);
   odom.emit(1);
   odom.emit(2);
-  EXPECT_EQ(unread(Token{}), (std::vector<int>{1, 2}));
+  const auto values = unread(Token{});
+  EXPECT_EQ(std::vector<int>(values.begin(), values.end()), (std::vector<int>{1, 2}));
   EXPECT_TRUE(unread(Token{}).empty());
 }
 

@@ -92,15 +92,15 @@ template <Medium M, Chain Body, class Until>
 
 // As above, reading the source's next value in each iteration (waiting up to
 // `limits.read_timeout`): the body is a Chain<std::pair<T, U>, T>, where U is
-// the source's value type. A control loop paced by a sensor.
+// the source's value type (or what it converts to: a Shm view's message). A control loop paced by a sensor.
 template <Medium M, Chain Body, class Until, Source S>
 [[nodiscard]] auto repeat(M& core, Body body, Until until, const S& source, RepeatLimits limits = {},
                           std::string name = "repeat") {
   using T = typename Body::output_type;
   using U = typename S::value_type;
-  static_assert(std::same_as<typename Body::input_type, std::pair<T, U>>,
+  static_assert(std::constructible_from<typename Body::input_type, T&&, U&&>,
                 "prime::repeat: with a source, the body must be a Chain<std::pair<T, U>, T>, with U the "
-                "source's value_type");
+                "source's value_type (or a pair U converts into)");
   static_assert(std::predicate<const Until&, const T&>, "prime::repeat: `until` must be callable as bool(const T&)");
   Graph loop = Graph::node(name, "repeat", std::string{core.medium()});
   Graph graph = Graph::sequence(Graph::parallel({&source.graph(), &loop}), body.graph()).looping_back_to(loop);

@@ -1,0 +1,12 @@
+#pragma once
+
+// Shm: topics in shared memory, published in place and read in place by
+// other processes of the same domain.
+#include "prime/common/bounded_string.hpp"
+#include "prime/common/bounded_vector.hpp"
+#include "prime/shm/core.hpp"
+#include "prime/shm/publisher.hpp"
+#include "prime/shm/qos.hpp"
+#include "prime/shm/registry.hpp"
+#include "prime/shm/subscription.hpp"
+#include "prime/topology.hpp"

@@ -1,0 +1,43 @@
+#pragma once
+
+// How the conformance suite runs on Shm: every core joins a domain of its
+// own, and a feed is a topic with a publisher and a subscription in this
+// process (the cross-process behaviour has tests of its own in tests/shm).
+
+#include <unistd.h>
+
+#include <atomic>
+#include <memory>
+#include <string>
+
+#include "prime/shm.hpp"
+
+namespace prime::test {
+
+template <>
+struct Harness<shm::Core> {
+  static std::unique_ptr<shm::Core> make_core() {
+    static std::atomic<int> made = 0;
+    return std::make_unique<shm::Core>("conformance-" + std::to_string(::getpid()) + "-" + std::to_string(made++));
+  }
+
+  template <class T>
+  struct Feed {
+    shm::Publisher<T> publisher;
+    shm::Subscription<T> source;
+
+    void emit(T value, Clock::time_point stamp = Clock::now()) {
+      if (auto sent = publisher.publish(value, stamp); !sent) throw Failure{sent.error()};
+    }
+  };
+
+  template <class T>
+  static Feed<T> feed(shm::Core& core, std::string name, Qos qos = {}) {
+    const shm::TopicQos topic{.capacity = qos.capacity, .overflow = qos.overflow, .block_timeout = qos.block_timeout};
+    auto publisher = core.publisher<T>(name, topic);
+    auto source = core.subscribe<T>(name, {.spin = qos.spin}, topic);
+    return {std::move(publisher), std::move(source)};
+  }
+};
+
+}  // namespace prime::test
