@@ -23,6 +23,11 @@ class bounded_string {
   // Throws Failure{limit_exceeded} when `text` is longer than N.
   constexpr bounded_string(std::string_view text) { assign(text); }  // NOLINT: converts like std::string
 
+  constexpr bounded_string& operator=(std::string_view text) {
+    assign(text);
+    return *this;
+  }
+
   constexpr void assign(std::string_view text) {
     if (text.size() > N)
       throw Failure{{Errc::limit_exceeded, "bounded_string<" + std::to_string(N) + ">: text of " +

@@ -41,7 +41,7 @@ struct DomainOptions {
   // Who may open the domain's segments: the creating user only by default.
   unsigned permissions = 0600;
   // How this participant is listed in the registry; empty: the program's name.
-  std::string participant;
+  std::string participant{};
 };
 
 }  // namespace prime::shm

@@ -82,10 +82,11 @@ class Registry {
       for (auto& t : r.topics) forget(t);
     }
     reclaim_locked();
-    for (auto& p : r.participants) {
+    for (std::size_t i = 0; i < kMaxParticipants; ++i) {
       ProcessId free = 0;
-      if (p.id.compare_exchange_strong(free, me_)) {
-        copy_name(p.name, name);
+      if (r.participants[i].id.compare_exchange_strong(free, me_)) {
+        copy_name(r.participants[i].name, name);
+        slot_ = i;
         return;
       }
     }
@@ -97,9 +98,7 @@ class Registry {
   void leave() {
     Locked lock{*this};
     auto& r = layout();
-    for (auto& p : r.participants) {
-      if (p.id.load() == me_) p.id.store(0);
-    }
+    if (slot_ < kMaxParticipants) r.participants[slot_].id.store(0);  // this core's entry: a process may have several
     const bool anyone_alive = std::any_of(std::begin(r.participants), std::end(r.participants),
                                           [](const auto& p) { return alive(p.id.load()); });
     if (!anyone_alive) {
@@ -237,6 +236,7 @@ class Registry {
   std::string domain_;
   unsigned permissions_;
   ProcessId me_ = this_process();
+  std::size_t slot_ = kMaxParticipants;  // where this participant is listed, once joined
   std::optional<Segment> segment_;
 };
 

@@ -132,8 +132,10 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   std::expected<std::size_t, Error> read_some(std::vector<Sample<View<T>>>& out, std::size_t max,
                                               Clock::time_point deadline, std::stop_token stop) override {
     if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
+    // Each view holds its slot: a batch is at most what a subscriber may hold.
+    const auto most = std::min<std::size_t>(max, subscriber_->topic().header().max_held);
     std::size_t n = 0;
-    for (; n < max; ++n) {
+    for (; n < std::max<std::size_t>(most, 1); ++n) {
       auto taken = subscriber_->cursor().try_take();
       if (!taken) break;
       out.push_back(sample(*taken));

@@ -110,15 +110,24 @@ class Writer {
     while (Clock::now() < spin_until) {
       if (room()) return;
     }
+    // Asleep, wait for half a ring of room, not one slot: then the publisher
+    // and a subscriber that keeps up take turns by the half ring, not by the
+    // sample, and wake each other rarely.
+    const auto wanted = std::min(needed + h.capacity / 2, next_);
+    auto plenty = [&] { return (min_cursor_ = std::min(slowest(), next_)) >= wanted; };
     auto next_check = Clock::now();
-    while (true) {
+    bool woken = false;
+    h.space_wanted.store(wanted, std::memory_order_seq_cst);
+    while (!woken) {
       if (Clock::now() >= next_check) {  // a subscriber that died holds no one up
         topic_->reclaim_dead_subscribers();
         next_check = Clock::now() + std::chrono::milliseconds{10};
       }
-      if (h.space.sleep_until(room, std::min(deadline, next_check))) return;
-      if (Clock::now() >= deadline) break;
+      woken = h.space.sleep_until(plenty, std::min(deadline, next_check)) || room();
+      if (!woken && Clock::now() >= deadline) break;
     }
+    h.space_wanted.store(~0ull, std::memory_order_relaxed);
+    if (woken) return;
     if (report_)
       report_(Error{Errc::overflow, "topic '" + topic_->name() + "': subscriber pid " + std::to_string(slowest_pid()) +
                                         " took nothing for " + std::to_string(block_timeout_.count() / 1'000'000) +
@@ -265,7 +274,7 @@ class Cursor {
     next_ = seq;
     auto& h = topic_->header();
     h.subscribers[slot_].cursor.store(seq, std::memory_order_seq_cst);
-    h.space.ring();
+    if (seq >= h.space_wanted.load(std::memory_order_seq_cst)) h.space.ring();
   }
 
   std::shared_ptr<Topic> topic_;

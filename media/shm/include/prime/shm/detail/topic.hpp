@@ -75,7 +75,8 @@ struct TopicHeader {
   alignas(64) std::atomic<ProcessId> publisher{0};
   alignas(64) std::atomic<std::uint64_t> head{0};  // sequences published so far
   Doorbell data;   // rung when a sample is published
-  Doorbell space;  // rung when a subscriber moves on (a `block` publisher may wait for it)
+  Doorbell space;  // rung when the slowest subscriber reaches `space_wanted` (a `block` publisher waits)
+  alignas(64) std::atomic<std::uint64_t> space_wanted{~0ull};
   SubscriberSlot subscribers[kMaxSubscribers];
 };
 

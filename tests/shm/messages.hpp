@@ -1,0 +1,42 @@
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+
+#include "prime/shm/qos.hpp"
+
+namespace prime::test {
+
+// A payload whose every word derives from its sequence number, with a
+// checksum: a sample read while being overwritten cannot pass check().
+struct Checked {
+  std::uint64_t seq;
+  std::uint64_t words[510];
+  std::uint64_t sum;
+};
+
+inline void fill(Checked& c, std::uint64_t seq) {
+  c.seq = seq;
+  std::uint64_t sum = seq;
+  for (std::uint64_t i = 0; i < 510; ++i) {
+    c.words[i] = seq * 0x9e3779b97f4a7c15ull + i;
+    sum += c.words[i];
+  }
+  c.sum = sum;
+}
+
+inline bool check(const Checked& c) {
+  std::uint64_t sum = c.seq;
+  for (std::uint64_t i = 0; i < 510; ++i) {
+    if (c.words[i] != c.seq * 0x9e3779b97f4a7c15ull + i) return false;
+    sum += c.words[i];
+  }
+  return sum == c.sum;
+}
+
+// Small ring, so the publisher laps slow readers all the time.
+inline constexpr shm::TopicQos kCheckedQos{.capacity = 4, .max_subscribers = 4, .max_held = 2};
+inline constexpr shm::TopicQos kSequenceQos{.capacity = 256, .overflow = Overflow::block,
+                                            .block_timeout = std::chrono::milliseconds{5000}};
+
+}  // namespace prime::test

@@ -1,0 +1,199 @@
+// Shm across real processes: the peers are the shm_peer program, started
+// with posix_spawn and killed with SIGKILL at known points.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "prime/shm.hpp"
+#include "shm/domain.hpp"
+#include "shm/messages.hpp"
+#include "shm/peer_process.hpp"
+
+namespace prime::test {
+namespace {
+
+using namespace std::chrono_literals;
+
+int segments_of(const std::string& domain) {
+  int n = 0;
+  for (const auto& entry : std::filesystem::directory_iterator{"/dev/shm"})
+    n += entry.path().filename().string().starts_with("prime." + domain + ".") ? 1 : 0;
+  return n;
+}
+
+bool inside_mapping_of(const std::string& part, const void* p) {
+  std::ifstream maps{"/proc/self/maps"};
+  std::string line;
+  const auto at = reinterpret_cast<std::uintptr_t>(p);
+  while (std::getline(maps, line)) {
+    if (line.find("/dev/shm/") == std::string::npos || line.find(part) == std::string::npos) continue;
+    std::uintptr_t begin = 0, end = 0;
+    std::sscanf(line.c_str(), "%lx-%lx", &begin, &end);
+    if (at >= begin && at < end) return true;
+  }
+  return false;
+}
+
+TEST(ShmProcesses, ASampleFromAnotherProcessIsReadInPlaceInTheSharedSegment) {
+  const auto domain = unique_domain("zero-copy");
+  shm::Core core{domain};
+  auto reader = core.subscribe<std::uint64_t>("numbers").subscribe();
+  PeerProcess peer{{"publish", domain, "numbers", "7", "1", "64", "drop"}};
+  ASSERT_TRUE(peer.says("published"));
+  auto sample = reader.read_for(5s);
+  ASSERT_TRUE(sample) << sample.error().describe();
+  EXPECT_EQ(*sample->value, 7u);
+  EXPECT_TRUE(inside_mapping_of("numbers", sample->value.get())) << "read where the other process wrote it";
+}
+
+TEST(ShmProcesses, APublisherKilledMidLoanLeavesSubscribersRunningAndARestartedOneContinues) {
+  const auto domain = unique_domain("killed-publisher");
+  shm::Core core{domain};
+  auto reader = core.subscribe<std::uint64_t>("odom").subscribe();
+  {
+    PeerProcess first{{"loan_and_hang", domain, "odom", "10", "64"}};
+    ASSERT_TRUE(first.says("loaned"));
+    first.kill9();
+  }
+  for (std::uint64_t i = 0; i < 10; ++i) {
+    auto sample = reader.read_for(5s);
+    ASSERT_TRUE(sample) << sample.error().describe();
+    EXPECT_EQ(*sample->value, i);
+  }
+  EXPECT_FALSE(reader.try_read()) << "the unpublished loan never reaches a subscriber";
+
+  PeerProcess second{{"publish", domain, "odom", "100", "10", "64", "drop"}};
+  ASSERT_TRUE(second.says("published"));
+  EXPECT_EQ(second.exit_code(), 0) << "the restarted publisher took the topic over";
+  for (std::uint64_t i = 0; i < 10; ++i) {
+    auto sample = reader.read_for(5s);
+    ASSERT_TRUE(sample) << sample.error().describe();
+    EXPECT_EQ(*sample->value, 100 + i);
+    EXPECT_EQ(sample->value.sequence(), 10 + i) << "the topic goes on where it stopped";
+  }
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
+TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleDoesNotStallABlockPublisher) {
+  const auto domain = unique_domain("killed-subscriber-block");
+  shm::Core core{domain};
+  auto publisher = core.publisher<std::uint64_t>("cmds", {.capacity = 4, .overflow = Overflow::block, .block_timeout = 30s});
+  auto live = core.subscribe<std::uint64_t>("cmds").subscribe();
+  PeerProcess holder{{"hold", domain, "cmds", "4", "block"}};
+  ASSERT_TRUE(holder.says("subscribed"));
+  ASSERT_TRUE(publisher.publish(0));
+  ASSERT_TRUE(holder.says("holding"));
+  holder.kill9();
+
+  const auto start = std::chrono::steady_clock::now();
+  std::uint64_t received = 0;
+  for (std::uint64_t i = 1; i <= 100; ++i) {
+    ASSERT_TRUE(publisher.publish(i));
+    while (auto s = live.try_read()) EXPECT_EQ(*s->value, received++);
+  }
+  EXPECT_LT(std::chrono::steady_clock::now() - start, 10s)
+      << "the dead subscriber was reclaimed, not waited for until the 30 s block timeout";
+  while (auto s = live.try_read()) EXPECT_EQ(*s->value, received++);
+  EXPECT_EQ(received, 101u);
+  EXPECT_EQ(core.registry().topics.at(0).subscriber_pids.size(), 1u) << "only the live subscriber is left";
+}
+
+TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleLeavesADropOldestPublisherUnaffected) {
+  const auto domain = unique_domain("killed-subscriber-drop");
+  shm::Core core{domain};
+  auto publisher = core.publisher<std::uint64_t>("scan", {.capacity = 4});
+  PeerProcess holder{{"hold", domain, "scan", "4", "drop"}};
+  ASSERT_TRUE(holder.says("subscribed"));
+  ASSERT_TRUE(publisher.publish(0));
+  ASSERT_TRUE(holder.says("holding"));
+  holder.kill9();
+  for (std::uint64_t i = 1; i <= 10000; ++i) ASSERT_TRUE(publisher.publish(i)) << i;
+  EXPECT_EQ(core.reclaim(), 1u) << "the dead subscriber's slot (and the sample it held) is reclaimed";
+}
+
+TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwrite) {
+  const auto domain = unique_domain("torn");
+  shm::Core core{domain};
+  auto topic = core.subscribe<Checked>("checked", {}, kCheckedQos);
+  auto reader = topic.subscribe();
+  PeerProcess publisher{{"checksum_publish", domain, "checked", "200000"}};
+  std::uint64_t received = 0, torn = 0, last = 0;
+  bool done = false;
+  while (!done) {
+    done = publisher.exit_code(0ms).has_value();  // drain once more after it ends
+    while (auto s = reader.try_read()) {
+      ++received;
+      if (!check(*s->value)) ++torn;
+      EXPECT_GE(s->value->seq, last);
+      last = s->value->seq;
+    }
+  }
+  EXPECT_EQ(torn, 0u) << "of " << received << " samples";
+  EXPECT_GT(received, 0u);
+  EXPECT_GT(reader.lost(), 0u) << "the publisher did lap the reader: the test exercised overwriting";
+  EXPECT_EQ(received + reader.lost(), 200000u) << "every sample is either delivered whole or counted lost";
+}
+
+TEST(ShmProcesses, BlockDeliversEveryMessageAcrossProcessesWithNoGapOrDuplicate) {
+  const auto domain = unique_domain("sequence");
+  shm::Core core{domain};
+  auto reader = core.subscribe<std::uint64_t>("seq", {}, kSequenceQos).subscribe();
+  PeerProcess publisher{{"sequence_publish", domain, "seq", std::to_string(PRIME_SHM_SEQUENCE_COUNT)}};
+  ASSERT_TRUE(publisher.says("ready"));
+  std::uint64_t expected = 0, wrong = 0;
+  std::vector<Sample<shm::View<std::uint64_t>>> batch;
+  while (expected < PRIME_SHM_SEQUENCE_COUNT) {
+    batch.clear();
+    auto got = reader.read_some(batch, 256, Clock::now() + 10s);
+    ASSERT_TRUE(got) << got.error().describe() << " after " << expected << " messages";
+    for (const auto& s : batch) {
+      if (*s.value != expected || s.value.sequence() != expected) ++wrong;
+      ++expected;
+    }
+  }
+  EXPECT_EQ(wrong, 0u);
+  EXPECT_EQ(reader.lost(), 0u);
+  EXPECT_EQ(publisher.exit_code(), 0);
+  EXPECT_FALSE(reader.try_read()) << "nothing beyond the last message";
+}
+
+TEST(ShmProcesses, SegmentsLeftByADeadRunAreCleanedWhenTheDomainStarts) {
+  const auto domain = unique_domain("stale");
+  {
+    PeerProcess crashed{{"leave_segments", domain, "old"}};
+    ASSERT_TRUE(crashed.says("created"));
+    crashed.kill9();
+  }
+  ASSERT_EQ(segments_of(domain), 2) << "the killed run left its registry and topic behind";
+  shm::Core core{domain};
+  EXPECT_EQ(segments_of(domain), 1) << "joining removed the dead run's topic";
+  auto history = core.subscribe<std::uint64_t>("old", {.history = 10}).subscribe().read_all();
+  EXPECT_TRUE(history.empty()) << "the topic starts afresh";
+}
+
+TEST(ShmProcesses, TheRegistryShowsOtherProcessesAndForgetsThemWhenTheyDie) {
+  const auto domain = unique_domain("registry");
+  shm::Core core{domain, {.participant = "test"}};
+  PeerProcess peer{{"leave_segments", domain, "status"}};
+  ASSERT_TRUE(peer.says("created"));
+  const auto pid = static_cast<std::uint32_t>(peer.pid());
+  auto seen = core.registry();
+  ASSERT_EQ(seen.participants.size(), 2u);
+  EXPECT_TRUE(seen.participants[0].pid == pid || seen.participants[1].pid == pid);
+  ASSERT_EQ(seen.topics.size(), 1u);
+  EXPECT_EQ(seen.topics[0].publisher_pid, pid);
+
+  peer.kill9();
+  auto after = core.registry();
+  ASSERT_EQ(after.participants.size(), 1u);
+  EXPECT_EQ(after.participants[0].name, "test");
+  EXPECT_EQ(after.topics.at(0).publisher_pid, 0u) << "a dead publisher is not listed";
+}
+
+}  // namespace
+}  // namespace prime::test
