@@ -47,6 +47,7 @@ class Core : public ErasedChainRuntime {
     const auto have = topic->qos();
     auto want = qos;
     if (want.max_message_size == 0) want.max_message_size = Fingerprint::of<T>().size;
+    if (want.max_held == 0) want.max_held = want.capacity;
     if (have.capacity != want.capacity || have.max_message_size != want.max_message_size ||
         have.overflow != want.overflow || have.max_subscribers != want.max_subscribers || have.max_held != want.max_held)
       throw Failure{{Errc::limit_exceeded, "topic '" + name + "' exists with " + describe(have) +

@@ -21,9 +21,11 @@ struct TopicQos {
   // before it fails with Errc::timeout (naming the topic and that subscriber).
   std::chrono::milliseconds block_timeout{1000};
   std::size_t max_subscribers = 8;  // live subscriptions at once (at most 62)
-  // Samples each subscriber may hold at once beyond the ring; the publisher
-  // always has a free slot while subscribers keep to this.
-  std::size_t max_held = 4;
+  // Samples each subscriber may hold at once (views alive); the publisher
+  // always has a free slot while subscribers keep to this. 0 means the
+  // capacity, so that read_all() is always safe; set it lower for topics of
+  // large messages, whose slots all take memory.
+  std::size_t max_held = 0;
 };
 
 // One subscriber's own choices.

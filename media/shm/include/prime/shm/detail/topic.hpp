@@ -186,9 +186,10 @@ class Topic {
   static std::size_t message_size(const Fingerprint& type, const TopicQos& qos) {
     return qos.max_message_size != 0 ? qos.max_message_size : type.size;
   }
+  static std::size_t held(const TopicQos& qos) { return qos.max_held != 0 ? qos.max_held : qos.capacity; }
   static std::size_t chunk_count(const TopicQos& qos) {
     // The ring's chunks, every subscriber's allowance, and one the publisher loans.
-    return qos.capacity + qos.max_subscribers * qos.max_held + 1;
+    return qos.capacity + qos.max_subscribers * held(qos) + 1;
   }
   static std::size_t layout_size(const Fingerprint& type, const TopicQos& qos) {
     const auto ring = round_up(sizeof(TopicHeader), kPayloadAlignment);
@@ -207,7 +208,7 @@ class Topic {
     header->max_message_size = message_size(type, qos);
     header->chunk_stride = round_up(sizeof(ChunkHeader) + header->max_message_size, kPayloadAlignment);
     header->max_subscribers = qos.max_subscribers;
-    header->max_held = qos.max_held;
+    header->max_held = held(qos);
     header->block_timeout_ns = std::chrono::nanoseconds{qos.block_timeout}.count();
     header->ring_offset = round_up(sizeof(TopicHeader), kPayloadAlignment);
     header->chunks_offset = round_up(header->ring_offset + qos.capacity * sizeof(std::uint32_t), kPayloadAlignment);

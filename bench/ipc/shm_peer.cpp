@@ -1,0 +1,144 @@
+// Shm: Prime's own medium, topics of raw bytes in a domain of this benchmark.
+//
+// Zero copy, as for Iceoryx: "sending N bytes" is loaning an N-byte sample,
+// writing a sequence number into it and publishing it; the receiver reads
+// the number where the sender wrote it. The other N - 8 bytes are never
+// touched by either side.
+//
+//   Latency          the parent publishes on `ping`; the child busy-polls its
+//                    reader and answers with an N-byte sample on `pong`.
+//   LatencySleeping  the same, but both readers sleep on the topic's futex
+//                    at once (spin 0): the peer of FutexWake.
+//   Throughput       the child publishes back-to-back on a `block` topic
+//                    kStreamDepth deep (lossless: it waits for the parent);
+//                    the parent busy-polls, one sample per iteration.
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <string>
+
+#include "harness.hpp"
+#include "payload.hpp"
+#include "prime/shm.hpp"
+
+namespace {
+
+namespace ipc = prime::bench::ipc;
+namespace shm = prime::shm;
+using namespace std::chrono_literals;
+
+std::string new_domain() {
+  static std::atomic<int> next{0};
+  return "prime-ipc-" + std::to_string(::getpid()) + "-" + std::to_string(next++);
+}
+
+shm::TopicQos latency_qos(std::size_t bytes) { return {.capacity = 4, .max_message_size = bytes}; }
+shm::TopicQos stream_qos(std::size_t bytes) {
+  return {.capacity = ipc::kStreamDepth, .max_message_size = bytes, .overflow = prime::Overflow::block,
+          .block_timeout = 10s, .max_subscribers = 1, .max_held = 4};
+}
+
+void send(shm::Publisher<shm::Bytes>& publisher, std::size_t bytes, std::uint64_t seq) {
+  auto sample = publisher.loan(bytes);
+  if (!sample) throw ipc::PeerError{"shm: " + sample.error().describe()};
+  ipc::stamp(sample->bytes().data(), seq);
+  std::move(*sample).publish();
+}
+
+bool try_take(prime::Reader<shm::View<shm::Bytes>>& reader, std::uint64_t seq) {
+  auto sample = reader.try_read();
+  if (!sample) return false;
+  const auto got = ipc::seq_of(sample->value.bytes().data());
+  if (got != seq) throw ipc::out_of_sequence(seq, got);
+  return true;
+}
+
+// Waits for `seq` asleep on the futex, looking at the other process between
+// sleeps of at most 50 ms.
+template <ipc::Side S>
+void sleep_and_take(S& side, prime::Reader<shm::View<shm::Bytes>>& reader, std::uint64_t seq) {
+  ipc::Patience<S> patience{side};
+  while (true) {
+    auto sample = reader.read_for(50ms);
+    if (sample) {
+      const auto got = ipc::seq_of(sample->value.bytes().data());
+      if (got != seq) throw ipc::out_of_sequence(seq, got);
+      return;
+    }
+    patience.idle();
+  }
+}
+
+template <bool kSleeps>
+void echo(ipc::Child& self) {
+  shm::Core core{self.arg(0)};
+  const auto qos = latency_qos(self.bytes());
+  auto ping = core.subscribe<shm::Bytes>("ping", {.spin = kSleeps ? 0us : 50us}, qos).subscribe();
+  auto pong = core.publisher<shm::Bytes>("pong", qos);
+  self.ready();
+  for (std::uint64_t seq = 1;; ++seq) {
+    if constexpr (kSleeps) sleep_and_take(self, ping, seq);
+    else ipc::spin_until(self, [&] { return try_take(ping, seq); });
+    send(pong, self.bytes(), seq);
+  }
+}
+const ipc::ChildEntry kEcho{"Shm.echo", echo<false>};
+const ipc::ChildEntry kEchoSleeping{"Shm.echo_sleeping", echo<true>};
+
+void stream(ipc::Child& self) {
+  shm::Core core{self.arg(0)};
+  auto out = core.publisher<shm::Bytes>("stream", stream_qos(self.bytes()));
+  self.ready();
+  for (std::uint64_t seq = 1;; ++seq) {
+    if (seq % 1024 == 0) self.check();
+    send(out, self.bytes(), seq);
+  }
+}
+const ipc::ChildEntry kStream{"Shm.stream", stream};
+
+template <bool kSleeps>
+void latency(benchmark::State& state) {
+  ipc::run(state, [&](std::size_t bytes) {
+    const auto domain = new_domain();
+    shm::Core core{domain};
+    const auto qos = latency_qos(bytes);
+    auto ping = core.publisher<shm::Bytes>("ping", qos);
+    auto pong = core.subscribe<shm::Bytes>("pong", {.spin = kSleeps ? 0us : 50us}, qos).subscribe();
+    ipc::Link child{kSleeps ? "Shm.echo_sleeping" : "Shm.echo", bytes, {}, {domain}};
+    child.wait_ready();
+    child.go();
+    ipc::time_round_trips(state, [&](std::uint64_t seq) {
+      send(ping, bytes, seq);
+      if constexpr (kSleeps) sleep_and_take(child, pong, seq);
+      else ipc::spin_until(child, [&] { return try_take(pong, seq); });
+    });
+    child.stop();
+  });
+}
+
+void BM_Latency_Shm(benchmark::State& state) { latency<false>(state); }
+void BM_Latency_ShmSleeping(benchmark::State& state) { latency<true>(state); }
+BENCHMARK(BM_Latency_Shm)->Apply(ipc::latency_payloads);
+BENCHMARK(BM_Latency_ShmSleeping)->Arg(64)->UseRealTime();
+
+void BM_Throughput_Shm(benchmark::State& state) {
+  ipc::run(state, [&](std::size_t bytes) {
+    const auto domain = new_domain();
+    shm::Core core{domain};
+    auto in = core.subscribe<shm::Bytes>("stream", {}, stream_qos(bytes)).subscribe();
+    ipc::Link child{"Shm.stream", bytes, {}, {domain}};
+    child.set_drain([&] {
+      while (in.try_read()) {  // one view at a time: the topic lets a subscriber hold 4
+      }
+    });
+    child.wait_ready();
+    child.go();
+    ipc::time_stream(state, [&](std::uint64_t seq) { ipc::spin_until(child, [&] { return try_take(in, seq); }); });
+    child.stop();
+  });
+}
+BENCHMARK(BM_Throughput_Shm)->Apply(ipc::throughput_payloads);
+
+}  // namespace
