@@ -91,8 +91,10 @@ class Writer {
     h.head.store(seq + 1, std::memory_order_seq_cst);
     if (old != kNoChunk) {
       auto& dropped = topic_->chunk(old);
-      dropped.seq.store(kNotPublished, std::memory_order_seq_cst);
-      dropped.holders.fetch_and(~kRingBit);
+      // Released by the fetch_and: a subscriber whose hold lands after it
+      // sees the chunk no longer carries that sequence.
+      dropped.seq.store(kNotPublished, std::memory_order_relaxed);
+      dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
     }
     h.data.ring();
   }
