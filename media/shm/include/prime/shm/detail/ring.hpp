@@ -86,8 +86,8 @@ class Writer {
     c.seq.store(seq, std::memory_order_release);
     c.holders.fetch_xor(kRingBit | kLoanBit);  // from the loan to the ring in one step
     auto& entry = topic_->ring(seq);
-    const auto old = entry.load(std::memory_order_relaxed);
-    entry.store(chunk, std::memory_order_release);
+    const auto old = RingEntry::chunk(entry.load(std::memory_order_relaxed));
+    entry.store(RingEntry::pack(seq, chunk), std::memory_order_release);
     h.head.store(seq + 1, std::memory_order_seq_cst);
     if (old != kNoChunk) {
       auto& dropped = topic_->chunk(old);
@@ -161,8 +161,8 @@ class Writer {
     auto& h = topic_->header();
     std::vector<bool> in_ring(h.chunk_count, false);
     for (std::uint64_t i = 0; i < h.capacity; ++i) {
-      const auto c = topic_->ring(i).load();
-      if (c != kNoChunk && c < h.chunk_count) in_ring[c] = true;
+      const auto c = RingEntry::chunk(topic_->ring(i).load());
+      if (c < h.chunk_count) in_ring[c] = true;
     }
     for (std::uint32_t c = 0; c < h.chunk_count; ++c) {
       auto& chunk = topic_->chunk(c);
@@ -233,16 +233,16 @@ class Cursor {
 
   [[nodiscard]] const std::shared_ptr<Topic>& topic() const noexcept { return topic_; }
 
-  // The next sample, if one is published and unread.
+  // The next sample, if one is published and unread. Looks at one ring
+  // entry (one cache line) when nothing is.
   std::optional<Taken> try_take() {
     auto& h = topic_->header();
     while (true) {
-      const auto head = h.head.load(std::memory_order_acquire);
-      if (next_ >= head) return std::nullopt;
-      if (head - next_ > h.capacity) skip_to(head - h.capacity);
-      auto& entry = topic_->ring(next_);
-      const auto index = entry.load(std::memory_order_acquire);
-      if (index < h.chunk_count) {
+      const auto entry = topic_->ring(next_).load(std::memory_order_acquire);
+      const auto ahead = RingEntry::ahead(entry, next_);
+      if (ahead < 0) return std::nullopt;
+      if (ahead == 0) {
+        const auto index = RingEntry::chunk(entry);
         auto& chunk = topic_->chunk(index);
         chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
         if (chunk.seq.load(std::memory_order_seq_cst) == next_) {
@@ -252,11 +252,20 @@ class Cursor {
         }
         chunk.holders.fetch_and(~bit_);
       }
-      // Overwritten while we looked: it is lost to us.
-      skip_to(next_ + 1);
+      // Overwritten before we took it: lost to us. Skip to the oldest still
+      // in the ring.
+      const auto head = h.head.load(std::memory_order_acquire);
+      skip_to(std::max(next_ + 1, head > h.capacity ? head - h.capacity : 0));
     }
   }
 
+  // Whether the next sample (or a later one) is out: the ring entry, for a
+  // busy poll...
+  [[nodiscard]] bool ready() const noexcept {
+    return RingEntry::ahead(topic_->ring(next_).load(std::memory_order_acquire), next_) >= 0;
+  }
+  // ...and the head, for a sleeper: the publisher stores it seq_cst before it
+  // looks for sleepers.
   [[nodiscard]] bool available() const noexcept {
     return topic_->header().head.load(std::memory_order_seq_cst) > next_;
   }

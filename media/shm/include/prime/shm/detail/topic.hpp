@@ -33,12 +33,35 @@ namespace prime::shm::detail {
 // subscriber's holds are cleared by clearing its bit everywhere.
 
 inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d31ull;  // "PRIMESM1"
-inline constexpr std::uint32_t kLayoutVersion = 1;
+inline constexpr std::uint32_t kLayoutVersion = 2;
 inline constexpr std::size_t kMaxSubscribers = 62;
 inline constexpr std::uint64_t kRingBit = 1ull << 63;
 inline constexpr std::uint64_t kLoanBit = 1ull << 62;
 inline constexpr std::uint64_t kNotPublished = ~0ull;  // a chunk's sequence when it carries none
-inline constexpr std::uint32_t kNoChunk = ~0u;
+inline constexpr std::uint32_t kNoChunk = (1u << 24) - 1;
+
+// A ring entry: which chunk carries which sequence, in one word, so that a
+// busy subscriber polls one cache line and learns both that its next sample
+// is out and where it is. The sequence is kept modulo 2^40 (compared with
+// wrap-around); the full one is in the chunk, which a subscriber checks.
+struct RingEntry {
+  static constexpr int kChunkBits = 24;
+  static constexpr std::uint64_t kSeqMask = (1ull << 40) - 1;
+
+  static constexpr std::uint64_t pack(std::uint64_t seq, std::uint32_t chunk) noexcept {
+    return ((seq & kSeqMask) << kChunkBits) | chunk;
+  }
+  static constexpr std::uint32_t chunk(std::uint64_t entry) noexcept {
+    return static_cast<std::uint32_t>(entry & ((1u << kChunkBits) - 1));
+  }
+  // How far the entry's sequence is ahead of `seq`: 0 when it carries it,
+  // negative while it still holds an older one, positive once overwritten.
+  static constexpr std::int64_t ahead(std::uint64_t entry, std::uint64_t seq) noexcept {
+    const auto d = ((entry >> kChunkBits) - seq) & kSeqMask;
+    return d >= (1ull << 39) ? static_cast<std::int64_t>(d) - static_cast<std::int64_t>(1ull << 40)
+                             : static_cast<std::int64_t>(d);
+  }
+};
 inline constexpr std::uint64_t kNoCursor = ~0ull;        // a subscriber slot not (yet) reading
 inline constexpr ProcessId kReclaiming = ~0ull;          // a slot whose dead owner is being cleared
 inline constexpr std::size_t kPayloadAlignment = 64;
@@ -122,7 +145,7 @@ class Topic {
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
   [[nodiscard]] const Segment& segment() const noexcept { return segment_; }
   [[nodiscard]] TopicHeader& header() const noexcept { return *header_; }
-  [[nodiscard]] std::atomic<std::uint32_t>& ring(std::uint64_t seq) const noexcept {
+  [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept {
     return ring_[seq % header_->capacity];
   }
   [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept {
@@ -179,6 +202,7 @@ class Topic {
     if (qos.max_subscribers == 0 || qos.max_subscribers > kMaxSubscribers)
       refuse("max_subscribers must be in [1, " + std::to_string(kMaxSubscribers) + "], not " +
              std::to_string(qos.max_subscribers));
+    if (chunk_count(qos) >= kNoChunk) refuse("capacity and subscribers need more than 2^24 slots");
     if (qos.max_message_size != 0 && qos.max_message_size < type.size)
       refuse("max_message_size " + std::to_string(qos.max_message_size) + " is smaller than " + type.describe());
   }
@@ -193,7 +217,7 @@ class Topic {
   }
   static std::size_t layout_size(const Fingerprint& type, const TopicQos& qos) {
     const auto ring = round_up(sizeof(TopicHeader), kPayloadAlignment);
-    const auto chunks = round_up(ring + qos.capacity * sizeof(std::uint32_t), kPayloadAlignment);
+    const auto chunks = round_up(ring + qos.capacity * sizeof(std::uint64_t), kPayloadAlignment);
     const auto stride = round_up(sizeof(ChunkHeader) + message_size(type, qos), kPayloadAlignment);
     return chunks + chunk_count(qos) * stride;
   }
@@ -211,10 +235,11 @@ class Topic {
     header->max_held = held(qos);
     header->block_timeout_ns = std::chrono::nanoseconds{qos.block_timeout}.count();
     header->ring_offset = round_up(sizeof(TopicHeader), kPayloadAlignment);
-    header->chunks_offset = round_up(header->ring_offset + qos.capacity * sizeof(std::uint32_t), kPayloadAlignment);
+    header->chunks_offset = round_up(header->ring_offset + qos.capacity * sizeof(std::uint64_t), kPayloadAlignment);
     header->creator = this_process();
-    auto* ring = reinterpret_cast<std::atomic<std::uint32_t>*>(segment.data() + header->ring_offset);
-    for (std::size_t i = 0; i < qos.capacity; ++i) ::new (ring + i) std::atomic<std::uint32_t>{kNoChunk};
+    auto* ring = reinterpret_cast<std::atomic<std::uint64_t>*>(segment.data() + header->ring_offset);
+    for (std::size_t i = 0; i < qos.capacity; ++i)  // each entry "one lap behind": nothing published yet
+      ::new (ring + i) std::atomic<std::uint64_t>{RingEntry::pack(i - qos.capacity, kNoChunk)};
     for (std::size_t i = 0; i < header->chunk_count; ++i)
       ::new (segment.data() + header->chunks_offset + i * header->chunk_stride) ChunkHeader{};
     header->magic.store(kTopicMagic, std::memory_order_release);
@@ -240,7 +265,7 @@ class Topic {
   static std::shared_ptr<Topic> finish(const std::string& name, Segment segment) {
     auto topic = std::shared_ptr<Topic>{new Topic{name, std::move(segment)}};
     auto* base = topic->segment_.data();
-    topic->ring_ = reinterpret_cast<std::atomic<std::uint32_t>*>(base + topic->header_->ring_offset);
+    topic->ring_ = reinterpret_cast<std::atomic<std::uint64_t>*>(base + topic->header_->ring_offset);
     topic->chunks_ = base + topic->header_->chunks_offset;
     return topic;
   }
@@ -248,7 +273,7 @@ class Topic {
   std::string name_;
   Segment segment_;
   TopicHeader* header_;
-  std::atomic<std::uint32_t>* ring_ = nullptr;
+  std::atomic<std::uint64_t>* ring_ = nullptr;
   std::byte* chunks_ = nullptr;
 };
 
