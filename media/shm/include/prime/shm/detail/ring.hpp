@@ -11,6 +11,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "prime/logic/error.hpp"
@@ -44,6 +45,7 @@ class Writer {
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
   ~Writer() {
+    if (ready_ != kNoChunk) discard(ready_);
     auto expected = me_;
     topic_->header().publisher.compare_exchange_strong(expected, 0);
   }
@@ -59,18 +61,26 @@ class Writer {
   std::expected<std::uint32_t, Error> loan() {
     auto& h = topic_->header();
     if (static_cast<Overflow>(h.overflow) == Overflow::block) wait_for_room();
+    if (ready_ != kNoChunk) return std::exchange(ready_, kNoChunk);
     for (int pass = 0; pass < 2; ++pass) {
-      for (std::uint64_t tried = 0; tried < h.chunk_count; ++tried) {
-        const auto i = static_cast<std::uint32_t>(search_++ % h.chunk_count);
-        std::uint64_t free = 0;
-        if (topic_->chunk(i).holders.compare_exchange_strong(free, kLoanBit)) return i;
-      }
+      if (auto i = claim()) return *i;
       if (topic_->reclaim_dead_subscribers() == 0) break;
     }
     return std::unexpected(Error{Errc::limit_exceeded,
                                  "topic '" + topic_->name() + "': all " + std::to_string(h.chunk_count) +
                                      " chunks are in use; subscribers hold more than max_held (" +
                                      std::to_string(h.max_held) + ") samples each"});
+  }
+
+  // A free chunk, now held by this publisher, if there is one.
+  std::optional<std::uint32_t> claim() noexcept {
+    const auto count = topic_->header().chunk_count;
+    for (std::uint64_t tried = 0; tried < count; ++tried) {
+      const auto i = static_cast<std::uint32_t>(search_++ % count);
+      std::uint64_t free = 0;
+      if (topic_->chunk(i).holders.compare_exchange_strong(free, kLoanBit)) return i;
+    }
+    return std::nullopt;
   }
 
   // Hands a loaned chunk back unpublished.
@@ -97,6 +107,13 @@ class Writer {
       dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
     }
     h.data.ring();
+    // Claim the next loan's chunk now, while subscribers read this one, and
+    // fetch its lines for writing: the next loan then waits on no one.
+    if (auto next = claim()) {
+      ready_ = *next;
+      __builtin_prefetch(&topic_->chunk(ready_), 1);
+      __builtin_prefetch(topic_->payload(ready_), 1);
+    }
   }
 
  private:
@@ -182,6 +199,7 @@ class Writer {
   std::function<void(Error)> report_;
   std::uint64_t next_ = 0;
   std::uint64_t search_ = 0;
+  std::uint32_t ready_ = kNoChunk;  // claimed ahead for the next loan
   std::uint64_t min_cursor_ = 0;  // the slowest subscriber's cursor when last looked at
 };
 
@@ -244,6 +262,7 @@ class Cursor {
       if (ahead == 0) {
         const auto index = RingEntry::chunk(entry);
         auto& chunk = topic_->chunk(index);
+        __builtin_prefetch(topic_->payload(index));  // arrives while the hold is taken
         chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
         if (chunk.seq.load(std::memory_order_seq_cst) == next_) {
           const Taken taken{index, next_};
