@@ -4,6 +4,8 @@
 
 #include <atomic>
 #include <chrono>
+#include <expected>
+#include <mutex>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -391,6 +393,41 @@ TYPED_TEST(SourceTest, SourcesBufferedValuesAreFreedWithTheirReaders) {
     EXPECT_EQ(Lifetime::alive, before + 8);
   }
   EXPECT_EQ(Lifetime::alive, before);
+}
+
+TYPED_TEST(SourceTest, ForwardHandsEveryValueWithItsStampToASink) {
+  auto odom = this->template feed<int>("odom");
+  std::mutex mutex;
+  std::vector<std::pair<int, Clock::time_point>> got;
+  forward(odom.source, [&](const auto& value, Clock::time_point stamp) {
+    std::scoped_lock lock{mutex};
+    got.emplace_back(static_cast<const int&>(value), stamp);
+  });
+  const auto t0 = Clock::now();
+  odom.emit(1, t0);
+  odom.emit(2, t0 + 1ms);
+  ASSERT_TRUE(eventually([&] { std::scoped_lock lock{mutex}; return got.size() == 2; }));
+  EXPECT_EQ(got[0], std::make_pair(1, t0));
+  EXPECT_EQ(got[1], std::make_pair(2, t0 + 1ms));
+}
+
+TYPED_TEST(SourceTest, ForwardReportsWhatItsSinkRefusesAndGoesOn) {
+  auto errors = this->core->errors().subscribe();
+  auto odom = this->template feed<int>("odom");
+  std::atomic<int> delivered = 0;
+  forward(odom.source, [&](const auto& value, Clock::time_point) -> std::expected<void, Error> {
+    if (static_cast<const int&>(value) < 0) return std::unexpected(Error{Errc::unreachable, "the far side is down"});
+    ++delivered;
+    return {};
+  }, "to-redis");
+  odom.emit(-1);
+  odom.emit(5);
+  auto report = errors.read_for(kPatience);
+  ASSERT_TRUE(report);
+  EXPECT_EQ(report->value.code, Errc::unreachable);
+  EXPECT_NE(report->value.message.find("forward 'to-redis' of 'odom': the far side is down"), std::string::npos)
+      << report->value.message;
+  EXPECT_TRUE(eventually([&] { return delivered == 1; }));
 }
 
 TYPED_TEST(SourceTest, DescribesASourceTopology) {

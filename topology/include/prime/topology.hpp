@@ -7,6 +7,7 @@
 #include "prime/topology/erased_chain.hpp"
 #include "prime/topology/foreach.hpp"
 #include "prime/topology/fork.hpp"
+#include "prime/topology/forward.hpp"
 #include "prime/topology/graph.hpp"
 #include "prime/topology/if_then_else.hpp"
 #include "prime/topology/link.hpp"
