@@ -61,7 +61,11 @@ TYPED_TEST(ChainTest, ExceptionFromABlockReachesTheCaller) {
                    return x;
                  });
   EXPECT_EQ(failing(5), 10);
-  EXPECT_THROW((void)failing(6), std::domain_error);
+  if constexpr (passes_objects_in_place<TypeParam>()) {
+    EXPECT_THROW((void)failing(6), std::domain_error);
+  } else {  // the exception crossed a process boundary: its message and a code remain
+    EXPECT_TRUE(fails_with([&] { (void)failing(6); }, Errc::block_failed, "too far"));
+  }
   EXPECT_EQ(failing(1), 2) << "a chain that threw once keeps working";
 }
 
@@ -107,16 +111,20 @@ TYPED_TEST(ChainTest, ForkTeesEveryOutputIntoASource) {
 }
 
 TYPED_TEST(ChainTest, ChainsMoveTheirMessageWithoutCopying) {
-  auto& core = *this->core;
-  auto step = [](Lifetime m) {
-    ++m.value;
-    return m;
-  };
-  auto one = core.chain(step);
-  auto ten = one | one | one | one | one | one | one | one | one | one;
-  Lifetime::reset();
-  EXPECT_EQ(ten(Lifetime{0}).value, 10);
-  EXPECT_EQ(Lifetime::copies, 0);
+  if constexpr (!passes_objects_in_place<TypeParam>()) {
+    GTEST_SKIP() << "this medium serialises messages: there are no copies of the object to count";
+  } else {
+    auto& core = *this->core;
+    auto step = [](Lifetime m) {
+      ++m.value;
+      return m;
+    };
+    auto one = core.chain(step);
+    auto ten = one | one | one | one | one | one | one | one | one | one;
+    Lifetime::reset();
+    EXPECT_EQ(ten(Lifetime{0}).value, 10);
+    EXPECT_EQ(Lifetime::copies, 0);
+  }
 }
 
 TYPED_TEST(ChainTest, DescribesItselfAsTextAndDot) {

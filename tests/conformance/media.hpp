@@ -8,13 +8,14 @@
 #include "prime/liberty.hpp"
 #include "prime/radiant.hpp"
 #include "prime/shm.hpp"
+#include "prime/optimus.hpp"
 
 namespace prime::test {
 
 // Every medium the conformance suite runs on. A medium joins with one entry
 // here (and, if it needs constructor arguments or carries sources its own way,
 // a specialisation of Harness below).
-using Media = ::testing::Types<liberty::Core, radiant::Core, shm::Core>;
+using Media = ::testing::Types<liberty::Core, radiant::Core, shm::Core, optimus::Core>;
 
 // How the suite makes a core, and a source it can publish into, on a medium.
 // The default serves in-process media: an Event feeding core.source().
@@ -39,6 +40,22 @@ struct Harness {
   }
 };
 
+// What a medium can do, for the few tests that depend on it. A harness that
+// says nothing has the in-process answers; one that differs defines
+//   static constexpr bool kPassesObjectsInPlace = false;      // values (and a block's exceptions) are
+//                                                            // serialised: not copy-counted, not rethrown as their type
+//   static constexpr bool kRunsLinkedBlocksInOneWorker = false;  // each linked block runs in a worker of its own
+template <class M>
+constexpr bool passes_objects_in_place() {
+  if constexpr (requires { Harness<M>::kPassesObjectsInPlace; }) return Harness<M>::kPassesObjectsInPlace;
+  return true;
+}
+template <class M>
+constexpr bool runs_linked_blocks_in_one_worker() {
+  if constexpr (requires { Harness<M>::kRunsLinkedBlocksInOneWorker; }) return Harness<M>::kRunsLinkedBlocksInOneWorker;
+  return true;
+}
+
 template <class M>
 class MediumTest : public ::testing::Test {
  protected:
@@ -61,3 +78,4 @@ class MediumName {
 }  // namespace prime::test
 
 #include "conformance/shm_harness.hpp"
+#include "conformance/optimus_harness.hpp"

@@ -191,7 +191,9 @@ TYPED_TEST(SourceTest, ChainsLinkedFirstShareOneWorkerEachLinkHasItsOwn) {
   auto reader = staged.subscribe();
   lidar.emit(1);
   ASSERT_TRUE(reader.read_for(kPatience));
-  EXPECT_EQ(a_thread.load(), b_thread.load());
+  if constexpr (runs_linked_blocks_in_one_worker<TypeParam>()) {
+    EXPECT_EQ(a_thread.load(), b_thread.load());
+  }
   EXPECT_NE(b_thread.load(), c_thread.load());
   EXPECT_NE(a_thread.load(), std::this_thread::get_id());
 }
@@ -353,46 +355,58 @@ TYPED_TEST(SourceTest, RepeatWaitingOnASilentSourceTimesOut) {
 }
 
 TYPED_TEST(SourceTest, AnEventWithOneReaderMovesItsValueWithoutCopies) {
-  auto& core = *this->core;
-  auto step = [](Lifetime m) {
-    ++m.value;
-    return m;
-  };
-  Event<Lifetime> event;
-  auto source = core.source(event, "counted");
-  auto reader = (source | core.chain(step) | core.chain(step)).subscribe();
-  Lifetime::reset();
-  event.emit(Lifetime{1});
-  auto value = reader.read_for(kPatience);
-  ASSERT_TRUE(value);
-  EXPECT_EQ(value->value.value, 3);
-  EXPECT_EQ(Lifetime::copies, 0) << "one reader: the value is moved all the way";
+  if constexpr (!passes_objects_in_place<TypeParam>()) {
+    GTEST_SKIP() << "this medium serialises values: there are no copies of the object to count";
+  } else {
+    auto& core = *this->core;
+    auto step = [](Lifetime m) {
+      ++m.value;
+      return m;
+    };
+    Event<Lifetime> event;
+    auto source = core.source(event, "counted");
+    auto reader = (source | core.chain(step) | core.chain(step)).subscribe();
+    Lifetime::reset();
+    event.emit(Lifetime{1});
+    auto value = reader.read_for(kPatience);
+    ASSERT_TRUE(value);
+    EXPECT_EQ(value->value.value, 3);
+    EXPECT_EQ(Lifetime::copies, 0) << "one reader: the value is moved all the way";
+  }
 }
 
 TYPED_TEST(SourceTest, EachFurtherReaderCostsExactlyOneCopy) {
-  Event<Lifetime> event;
-  auto source = this->core->source(event, "counted");
-  auto r1 = source.subscribe();
-  auto r2 = source.subscribe();
-  auto r3 = source.subscribe();
-  Lifetime::reset();
-  event.emit(Lifetime{1});
-  EXPECT_EQ(Lifetime::copies, 2);
-  EXPECT_EQ(r1.try_read()->value.value, 1);
-  EXPECT_EQ(r3.try_read()->value.value, 1);
-  EXPECT_EQ(r2.try_read()->value.value, 1);
+  if constexpr (!passes_objects_in_place<TypeParam>()) {
+    GTEST_SKIP() << "this medium serialises values: there are no copies of the object to count";
+  } else {
+    Event<Lifetime> event;
+    auto source = this->core->source(event, "counted");
+    auto r1 = source.subscribe();
+    auto r2 = source.subscribe();
+    auto r3 = source.subscribe();
+    Lifetime::reset();
+    event.emit(Lifetime{1});
+    EXPECT_EQ(Lifetime::copies, 2);
+    EXPECT_EQ(r1.try_read()->value.value, 1);
+    EXPECT_EQ(r3.try_read()->value.value, 1);
+    EXPECT_EQ(r2.try_read()->value.value, 1);
+  }
 }
 
 TYPED_TEST(SourceTest, SourcesBufferedValuesAreFreedWithTheirReaders) {
-  const int before = Lifetime::alive;
-  {
-    Event<Lifetime> event;
-    auto source = this->core->source(event, "counted", {.capacity = 8});
-    auto reader = source.subscribe();
-    for (int i = 0; i < 20; ++i) event.emit(Lifetime{i});
-    EXPECT_EQ(Lifetime::alive, before + 8);
+  if constexpr (!passes_objects_in_place<TypeParam>()) {
+    GTEST_SKIP() << "this medium serialises values: there are no copies of the object to count";
+  } else {
+    const int before = Lifetime::alive;
+    {
+      Event<Lifetime> event;
+      auto source = this->core->source(event, "counted", {.capacity = 8});
+      auto reader = source.subscribe();
+      for (int i = 0; i < 20; ++i) event.emit(Lifetime{i});
+      EXPECT_EQ(Lifetime::alive, before + 8);
+    }
+    EXPECT_EQ(Lifetime::alive, before);
   }
-  EXPECT_EQ(Lifetime::alive, before);
 }
 
 TYPED_TEST(SourceTest, ForwardHandsEveryValueWithItsStampToASink) {

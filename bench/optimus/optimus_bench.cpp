@@ -1,0 +1,206 @@
+// Optimus against bare hiredis on the same redis-server, in one run:
+//
+//   BM_Hiredis_Ping              one PING round trip: the floor
+//   BM_Hiredis_RequestReply      a hand-written hiredis service: the caller
+//                                pipelines RPUSH request + BLPOP reply, an echo
+//                                thread BLPOPs and RPUSHes the answer — what a
+//                                user would write without Prime
+//   BM_Optimus_Hop               the same, as an Optimus chain call
+//   BM_Optimus_Linked2           two services linked: the data goes service to service
+//   BM_Optimus_CallerRouted2     the same two services, called one after the other
+//   BM_Optimus_Publish           a source's values appended one round trip each
+//   BM_Optimus_PublishPipelined  the same in batches of 64, one round trip per batch
+//   BM_Optimus_SourceThroughput  batches published and read back by a reader
+//
+// The binary starts its own redis-server (persistence off) on a free loopback port.
+#include <benchmark/benchmark.h>
+
+#include <atomic>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "optimus/support/redis_server.hpp"
+#include "prime/optimus.hpp"
+
+namespace {
+
+using namespace std::chrono_literals;
+using prime::optimus::detail::Connection;
+using prime::optimus::detail::Reply;
+
+prime::test::RedisServer& server() {
+  static prime::test::RedisServer redis;
+  return redis;
+}
+
+prime::optimus::Options options(const std::string& domain) {
+  return {.url = server().url(), .domain = "bench-" + domain};
+}
+
+Connection connect() {
+  prime::optimus::Options o{.url = server().url()};
+  auto c = Connection::open(o, *prime::optimus::detail::parse_url(o.url));
+  if (!c) throw prime::Failure{c.error()};
+  return std::move(*c);
+}
+
+void BM_Hiredis_Ping(benchmark::State& state) {
+  auto c = connect();
+  for (auto _ : state) {
+    auto r = c.command({"PING"});
+    if (!r) state.SkipWithError(r.error().describe().c_str());
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_Hiredis_Ping)->UseRealTime();
+
+// A service written by hand with hiredis: what Optimus is measured against.
+void BM_Hiredis_RequestReply(benchmark::State& state) {
+  const std::string requests = "bench-raw:requests", replies = "bench-raw:replies";
+  std::atomic<bool> done{false};
+  std::jthread echo{[&] {
+    auto c = connect();
+    c.set_timeout(2s);
+    bool answer_pending = false;
+    std::string answer;
+    while (!done) {
+      if (answer_pending) c.append({"RPUSH", replies, answer});
+      c.append({"BLPOP", requests, "0.2"});
+      if (answer_pending && !c.reply()) return;
+      auto got = c.reply();
+      if (!got) return;
+      answer_pending = (*got)->type == REDIS_REPLY_ARRAY;
+      if (answer_pending) answer.assign((*got)->element[1]->str, (*got)->element[1]->len);
+    }
+    if (answer_pending) (void)c.command({"RPUSH", replies, answer});
+  }};
+  auto c = connect();
+  c.set_timeout(2s);
+  std::int64_t x = 0;
+  for (auto _ : state) {
+    const std::string payload(reinterpret_cast<const char*>(&x), sizeof x);
+    c.append({"RPUSH", requests, payload});
+    c.append({"BLPOP", replies, "1"});
+    auto pushed = c.reply();
+    auto answer = c.reply();
+    if (!pushed || !answer || (*answer)->type != REDIS_REPLY_ARRAY) {
+      state.SkipWithError("the hand-written echo did not answer");
+      break;
+    }
+    ++x;
+  }
+  done = true;
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_Hiredis_RequestReply)->UseRealTime();
+
+void BM_Optimus_Hop(benchmark::State& state) {
+  prime::optimus::Core core{options("hop")};
+  auto step = core.serve("step", [](std::int64_t x) { return x + 1; });
+  std::int64_t x = 0;
+  for (auto _ : state) {
+    auto out = step.call(x);
+    if (!out) {
+      state.SkipWithError(out.error().describe().c_str());
+      break;
+    }
+    x = *out;
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_Optimus_Hop)->UseRealTime();
+
+void BM_Optimus_Linked2(benchmark::State& state) {
+  prime::optimus::Core core{options("linked")};
+  auto pipeline = core.serve("a", [](std::int64_t x) { return x + 1; }) | core.serve("b", [](std::int64_t x) { return x * 2; });
+  std::int64_t x = 0;
+  for (auto _ : state) {
+    auto out = pipeline.call(x & 0xffff);
+    if (!out) {
+      state.SkipWithError(out.error().describe().c_str());
+      break;
+    }
+    x = *out;
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_Optimus_Linked2)->UseRealTime();
+
+void BM_Optimus_CallerRouted2(benchmark::State& state) {
+  prime::optimus::Core core{options("routed")};
+  auto a = core.serve("a", [](std::int64_t x) { return x + 1; });
+  auto b = core.serve("b", [](std::int64_t x) { return x * 2; });
+  std::int64_t x = 0;
+  for (auto _ : state) {
+    auto mid = a.call(x & 0xffff);
+    auto out = mid ? b.call(*mid) : mid;
+    if (!out) {
+      state.SkipWithError(out.error().describe().c_str());
+      break;
+    }
+    x = *out;
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_Optimus_CallerRouted2)->UseRealTime();
+
+struct Imu {
+  double ax, ay, az, gx, gy, gz;
+  std::int64_t sequence;
+};
+
+void BM_Optimus_Publish(benchmark::State& state) {
+  prime::optimus::Core core{options("publish")};
+  auto pub = core.publisher<Imu>("imu", {.capacity = 4096});
+  Imu imu{};
+  for (auto _ : state) {
+    ++imu.sequence;
+    if (!pub.publish(imu)) {
+      state.SkipWithError("publish failed");
+      break;
+    }
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_Optimus_Publish)->UseRealTime();
+
+void BM_Optimus_PublishPipelined(benchmark::State& state) {
+  prime::optimus::Core core{options("pipelined")};
+  auto pub = core.publisher<Imu>("imu", {.capacity = 4096});
+  const auto batch_size = static_cast<std::size_t>(state.range(0));
+  std::vector<prime::Sample<Imu>> batch(batch_size, prime::Sample<Imu>{Imu{}, prime::Clock::now()});
+  for (auto _ : state) {
+    for (auto& s : batch) ++s.value.sequence;
+    if (!pub.publish_all(batch)) {
+      state.SkipWithError("publish_all failed");
+      break;
+    }
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(batch_size));
+}
+BENCHMARK(BM_Optimus_PublishPipelined)->Arg(64)->UseRealTime();
+
+void BM_Optimus_SourceThroughput(benchmark::State& state) {
+  prime::optimus::Core core{options("throughput")};
+  auto pub = core.publisher<Imu>("imu", {.capacity = 4096});
+  auto reader = pub.source().subscribe({.capacity = 4096});
+  const auto batch_size = static_cast<std::size_t>(state.range(0));
+  std::vector<prime::Sample<Imu>> batch(batch_size, prime::Sample<Imu>{Imu{}, prime::Clock::now()});
+  std::int64_t received = 0;
+  for (auto _ : state) {
+    if (!pub.publish_all(batch)) {
+      state.SkipWithError("publish_all failed");
+      break;
+    }
+    received += static_cast<std::int64_t>(reader.read_all().size());
+  }
+  if (received != state.iterations() * static_cast<std::int64_t>(batch_size)) state.SkipWithError("values were lost");
+  state.SetItemsProcessed(received);
+}
+BENCHMARK(BM_Optimus_SourceThroughput)->Arg(64)->UseRealTime();
+
+}  // namespace
+
+BENCHMARK_MAIN();

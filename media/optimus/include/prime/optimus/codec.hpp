@@ -1,0 +1,194 @@
+#pragma once
+
+#include <array>
+#include <bit>
+#include <concepts>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <exception>
+#include <expected>
+#include <string>
+#include <string_view>
+#include <type_traits>
+
+#include <msgpack.hpp>
+
+#include "prime/common/fingerprint.hpp"
+#include "prime/logic/error.hpp"
+
+namespace prime::optimus {
+
+// How a message's body is written, recorded in its header.
+enum class Format : std::uint8_t { bytes = 0, msgpack = 1, custom = 2 };
+
+// A trivially copyable type (and so a bounded_string / bounded_vector message)
+// travels as its bytes: same machine architecture on both sides, which the
+// header's fingerprint and byte-order flag check.
+template <class T>
+struct BytesCodec {
+  static_assert(std::is_trivially_copyable_v<T>);
+  static_assert(!std::is_pointer_v<T> && !std::is_member_pointer_v<T>,
+                "prime::optimus: a pointer means nothing in another process; send what it points to");
+  static constexpr Format kFormat = Format::bytes;
+
+  static void encode(const T& value, std::string& out) {
+    const auto bytes = std::bit_cast<std::array<char, sizeof(T)>>(value);
+    out.append(bytes.data(), bytes.size());
+  }
+  static std::expected<T, std::string> decode(std::string_view body) {
+    if (body.size() != sizeof(T))
+      return std::unexpected("a body of " + std::to_string(body.size()) + " bytes, not " + std::to_string(sizeof(T)));
+    std::array<char, sizeof(T)> bytes;
+    std::memcpy(bytes.data(), body.data(), sizeof(T));
+    T value = std::bit_cast<T>(bytes);
+    // Bounded types (bounded_string, bounded_vector) say how much of their
+    // storage is in use; a count past the capacity would read out of bounds.
+    if constexpr (requires { value.size(); T::capacity(); }) {
+      if (value.size() > T::capacity())
+        return std::unexpected("a size of " + std::to_string(value.size()) + " past the capacity " +
+                               std::to_string(T::capacity()));
+      if constexpr (requires { value.c_str(); }) {
+        if (value.c_str()[value.size()] != '\0') return std::unexpected(std::string{"text that is not NUL-terminated"});
+      }
+    }
+    return value;
+  }
+};
+
+// Any other type, through MessagePack (msgpack-cxx): the standard containers,
+// strings, tuples and pairs as they are, a user's struct with MSGPACK_DEFINE.
+template <class T>
+struct MsgpackCodec {
+  static constexpr Format kFormat = Format::msgpack;
+
+  static void encode(const T& value, std::string& out) {
+    struct Appender {
+      std::string& out;
+      void write(const char* data, std::size_t n) { out.append(data, n); }
+    } appender{out};
+    msgpack::pack(appender, value);
+  }
+  static std::expected<T, std::string> decode(std::string_view body) {
+    try {
+      // No container or string may claim more elements than there are bytes:
+      // a forged length cannot make the decoder allocate gigabytes.
+      const auto n = body.size();
+      const msgpack::unpack_limit limit{n, n, n, n, n, 64};
+      std::size_t offset = 0;
+      auto handle = msgpack::unpack(body.data(), n, offset, nullptr, nullptr, limit);
+      if (offset != n) return std::unexpected(std::to_string(n - offset) + " bytes after the MessagePack value");
+      return handle.get().template as<T>();
+    } catch (const std::exception& e) {
+      return std::unexpected(std::string{"MessagePack: "} + e.what());
+    }
+  }
+};
+
+namespace detail {
+template <class T>
+struct DefaultCodec {
+  using type = std::conditional_t<std::is_trivially_copyable_v<T>, BytesCodec<T>, MsgpackCodec<T>>;
+};
+}  // namespace detail
+
+// The codec of a message type: bytes for trivially copyable types, MessagePack
+// for the rest. Specialise it for a type of your own:
+//
+//   template <> struct prime::optimus::Codec<Scan> {
+//     static void encode(const Scan& scan, std::string& out);                  // appends
+//     static std::expected<Scan, std::string> decode(std::string_view body);  // says why not
+//   };
+template <class T>
+struct Codec : detail::DefaultCodec<T>::type {};
+
+template <class T>
+concept Encodable = requires(const T& value, std::string& out, std::string_view body) {
+  Codec<T>::encode(value, out);
+  { Codec<T>::decode(body) } -> std::same_as<std::expected<T, std::string>>;
+};
+
+namespace detail {
+
+// Every message starts with this header:
+//   "PO", version, format (bit 7: written on a big-endian machine),
+//   body size (u32, little-endian), fingerprint hash of the type (u64, little-endian)
+inline constexpr std::size_t kHeaderSize = 16;
+inline constexpr std::uint8_t kVersion = 1;
+inline constexpr std::uint8_t kBigEndianFlag = 0x80;
+
+template <class T>
+constexpr std::uint8_t format_byte() {
+  std::uint8_t format = static_cast<std::uint8_t>(Format::custom);
+  if constexpr (requires { Codec<T>::kFormat; }) format = static_cast<std::uint8_t>(Codec<T>::kFormat);
+  if constexpr (std::endian::native == std::endian::big) format |= kBigEndianFlag;
+  return format;
+}
+
+inline void put_le(std::string& out, std::size_t at, std::uint64_t value, int bytes) {
+  for (int i = 0; i < bytes; ++i) out[at + i] = static_cast<char>((value >> (8 * i)) & 0xff);
+}
+inline std::uint64_t get_le(std::string_view in, std::size_t at, int bytes) {
+  std::uint64_t value = 0;
+  for (int i = 0; i < bytes; ++i) value |= std::uint64_t{static_cast<unsigned char>(in[at + i])} << (8 * i);
+  return value;
+}
+
+}  // namespace detail
+
+// `value` as a message: header, then the codec's body.
+template <Encodable T>
+void encode_message(const T& value, std::string& out) {
+  static constexpr auto fingerprint = Fingerprint::of<T>();
+  const auto start = out.size();
+  out.resize(start + detail::kHeaderSize);
+  Codec<T>::encode(value, out);
+  const auto body = out.size() - start - detail::kHeaderSize;
+  if (body > UINT32_MAX) throw Failure{{Errc::limit_exceeded, "optimus: a " + fingerprint.describe() + " message of " + std::to_string(body) + " bytes is over 4 GiB"}};
+  out[start] = 'P';
+  out[start + 1] = 'O';
+  out[start + 2] = static_cast<char>(detail::kVersion);
+  out[start + 3] = static_cast<char>(detail::format_byte<T>());
+  detail::put_le(out, start + 4, body, 4);
+  detail::put_le(out, start + 8, fingerprint.hash, 8);
+}
+template <Encodable T>
+[[nodiscard]] std::string encode_message(const T& value) {
+  std::string out;
+  encode_message(value, out);
+  return out;
+}
+
+// A message back as a T, or an Errc::type_mismatch error that names `where`
+// (a key, a service) and what was expected. Never trusts the bytes.
+template <Encodable T>
+[[nodiscard]] std::expected<T, Error> decode_message(std::string_view message, std::string_view where) {
+  static constexpr auto fingerprint = Fingerprint::of<T>();
+  const auto fail = [&](const std::string& what) {
+    return std::unexpected(Error{Errc::type_mismatch, std::string{where} + ": expected a message of " +
+                                                          fingerprint.describe() + ", found " + what});
+  };
+  if (message.size() < detail::kHeaderSize)
+    return fail("only " + std::to_string(message.size()) + " bytes, less than a message header");
+  if (message[0] != 'P' || message[1] != 'O') return fail("data that is not a Prime message (no 'PO' header)");
+  if (static_cast<std::uint8_t>(message[2]) != detail::kVersion)
+    return fail("a message of header version " + std::to_string(static_cast<unsigned char>(message[2])));
+  const auto body_size = detail::get_le(message, 4, 4);
+  if (body_size != message.size() - detail::kHeaderSize)
+    return fail("a header promising " + std::to_string(body_size) + " body bytes where " +
+                std::to_string(message.size() - detail::kHeaderSize) + " are present");
+  const auto hash = detail::get_le(message, 8, 8);
+  if (hash != fingerprint.hash) {
+    char hex[24];
+    std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
+    return fail(std::string{"a message of another type (fingerprint "} + hex + ")");
+  }
+  if (static_cast<std::uint8_t>(message[3]) != detail::format_byte<T>())
+    return fail("a body in another format or byte order (format byte " +
+                std::to_string(static_cast<unsigned char>(message[3])) + ")");
+  auto value = Codec<T>::decode(message.substr(detail::kHeaderSize));
+  if (!value) return fail("a malformed body: " + value.error());
+  return std::move(*value);
+}
+
+}  // namespace prime::optimus

@@ -1,0 +1,253 @@
+#pragma once
+
+#include <hiredis/hiredis.h>
+#include <sys/socket.h>
+#include <sys/time.h>
+
+#include <charconv>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <expected>
+#include <initializer_list>
+#include <memory>
+#include <mutex>
+#include <stop_token>
+#include <span>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "prime/logic/error.hpp"
+#include "prime/optimus/options.hpp"
+
+namespace prime::optimus::detail {
+
+// Where a server is, parsed from "tcp://host:port" or "unix:///path".
+struct Endpoint {
+  bool unix_socket = false;
+  std::string host{};  // tcp
+  int port = 0;        // tcp
+  std::string path{};  // unix
+};
+
+inline std::expected<Endpoint, Error> parse_url(std::string_view url) {
+  const auto bad = [&](std::string_view why) {
+    return std::unexpected(Error{Errc::unreachable, "optimus: bad server URL '" + std::string{url} + "' (" +
+                                                        std::string{why} +
+                                                        "); expected tcp://host:port or unix:///path"});
+  };
+  if (url.starts_with("unix://")) {
+    Endpoint e{.unix_socket = true, .path = std::string{url.substr(7)}};
+    if (e.path.empty() || e.path.front() != '/') return bad("the socket path must be absolute");
+    return e;
+  }
+  if (!url.starts_with("tcp://")) return bad("unknown scheme");
+  auto rest = url.substr(6);
+  const auto colon = rest.rfind(':');
+  if (colon == std::string_view::npos || colon == 0) return bad("no host:port");
+  Endpoint e{.host = std::string{rest.substr(0, colon)}};
+  if (e.host.size() > 2 && e.host.front() == '[' && e.host.back() == ']') e.host = e.host.substr(1, e.host.size() - 2);
+  const auto port = rest.substr(colon + 1);
+  const auto [end, ec] = std::from_chars(port.data(), port.data() + port.size(), e.port);
+  if (ec != std::errc{} || end != port.data() + port.size() || e.port <= 0 || e.port > 65535)
+    return bad("the port must be a number in 1..65535");
+  return e;
+}
+
+struct ReplyDeleter {
+  void operator()(redisReply* r) const noexcept { freeReplyObject(r); }
+};
+using Reply = std::unique_ptr<redisReply, ReplyDeleter>;
+
+struct ContextDeleter {
+  void operator()(redisContext* c) const noexcept { redisFree(c); }
+};
+
+inline timeval to_timeval(std::chrono::microseconds d) {
+  if (d < std::chrono::microseconds{1000}) d = std::chrono::microseconds{1000};
+  return timeval{static_cast<time_t>(d.count() / 1'000'000), static_cast<suseconds_t>(d.count() % 1'000'000)};
+}
+
+// A command's words. Views: the strings must outlive the call.
+using Args = std::initializer_list<std::string_view>;
+
+// One connection to the server. Not thread-safe: hiredis contexts are not, so
+// each thread uses its own (see Pool). After an I/O error it is `broken()` and
+// must be dropped: a reply may be half read.
+class Connection {
+ public:
+  static std::expected<Connection, Error> open(const Options& options, const Endpoint& endpoint) {
+    const auto tv = to_timeval(options.connect_timeout);
+    std::unique_ptr<redisContext, ContextDeleter> ctx{
+        endpoint.unix_socket ? redisConnectUnixWithTimeout(endpoint.path.c_str(), tv)
+                             : redisConnectWithTimeout(endpoint.host.c_str(), endpoint.port, tv)};
+    if (!ctx) return std::unexpected(Error{Errc::unreachable, "redis at " + options.url + ": out of memory"});
+    if (ctx->err)
+      return std::unexpected(Error{Errc::unreachable, "redis at " + options.url + " is unreachable: " + ctx->errstr});
+    Connection c{std::move(ctx), options.url};
+    if (!c.set_timeout(options.connect_timeout))
+      return std::unexpected(Error{Errc::unreachable, "redis at " + options.url + ": cannot set a socket timeout"});
+    if (!options.password.empty()) {
+      auto reply = options.username.empty() ? c.command({"AUTH", options.password})
+                                            : c.command({"AUTH", options.username, options.password});
+      if (!reply) return std::unexpected(std::move(reply.error()));
+      if ((*reply)->type == REDIS_REPLY_ERROR)
+        return std::unexpected(Error{Errc::unreachable, "redis at " + options.url + " refused AUTH" +
+                                                            (options.username.empty() ? "" : " as '" + options.username + "'") +
+                                                            ": " + std::string{(*reply)->str, (*reply)->len}});
+    }
+    return c;
+  }
+
+  Connection(Connection&&) noexcept = default;
+  Connection& operator=(Connection&&) noexcept = default;
+
+  // Bounds every blocking read and write on the socket from now on.
+  bool set_timeout(std::chrono::microseconds timeout) {
+    if (timeout == timeout_) return true;
+    if (redisSetTimeout(ctx_.get(), to_timeval(timeout)) != REDIS_OK) return false;
+    timeout_ = timeout;
+    return true;
+  }
+
+  // Queues a command; nothing is sent until a reply is asked for.
+  void append(std::span<const std::string_view> args) {
+    argv_.clear();
+    lens_.clear();
+    for (auto a : args) {
+      argv_.push_back(a.data());
+      lens_.push_back(a.size());
+    }
+    if (redisAppendCommandArgv(ctx_.get(), static_cast<int>(argv_.size()), argv_.data(), lens_.data()) != REDIS_OK)
+      broken_ = true;
+    ++pending_;
+  }
+  void append(Args args) { append(std::span<const std::string_view>{args.begin(), args.size()}); }
+
+  // The next queued command's reply (sending what is queued first). An error
+  // reply from the server is a reply, not an Error: callers judge it.
+  std::expected<Reply, Error> reply() {
+    if (pending_ > 0) --pending_;
+    if (broken_) return std::unexpected(io_error());
+    void* raw = nullptr;
+    if (redisGetReply(ctx_.get(), &raw) != REDIS_OK || raw == nullptr) {
+      broken_ = true;
+      return std::unexpected(io_error());
+    }
+    return Reply{static_cast<redisReply*>(raw)};
+  }
+
+  std::expected<Reply, Error> command(std::span<const std::string_view> args) {
+    append(args);
+    return reply();
+  }
+  std::expected<Reply, Error> command(Args args) { return command(std::span<const std::string_view>{args.begin(), args.size()}); }
+
+  // Sends what is queued, without reading anything back.
+  bool flush() {
+    if (broken_) return false;
+    int done = 0;
+    while (!done) {
+      if (redisBufferWrite(ctx_.get(), &done) != REDIS_OK) {
+        broken_ = true;
+        return false;
+      }
+    }
+    return true;
+  }
+
+  // Reads and drops the replies of commands queued but not yet read.
+  bool drain() {
+    while (pending_ > 0)
+      if (!reply()) return false;
+    return true;
+  }
+
+  [[nodiscard]] bool broken() const noexcept { return broken_; }
+  [[nodiscard]] bool valid() const noexcept { return ctx_ != nullptr; }
+  [[nodiscard]] int pending() const noexcept { return pending_; }
+  [[nodiscard]] int fd() const noexcept { return ctx_->fd; }
+  [[nodiscard]] const std::string& url() const noexcept { return url_; }
+
+  // Ends a blocking read from another thread (a stop request): the socket is
+  // shut down, never closed, so the owner's descriptor stays valid until it
+  // drops this connection. Thread-safe.
+  void interrupt() const noexcept { ::shutdown(ctx_->fd, SHUT_RDWR); }
+
+ private:
+  Connection(std::unique_ptr<redisContext, ContextDeleter> ctx, std::string url)
+      : ctx_{std::move(ctx)}, url_{std::move(url)} {}
+
+  Error io_error() const {
+    std::string why = ctx_->err ? std::string{ctx_->errstr} : "connection lost";
+    if (ctx_->err == REDIS_ERR_IO && (errno == EAGAIN || errno == EWOULDBLOCK)) why = "no answer in time";
+    return Error{Errc::unreachable, "redis at " + url_ + ": " + why};
+  }
+
+  std::unique_ptr<redisContext, ContextDeleter> ctx_;
+  std::string url_;
+  std::chrono::microseconds timeout_{-1};
+  bool broken_ = false;
+  int pending_ = 0;
+  std::vector<const char*> argv_;
+  std::vector<std::size_t> lens_;
+};
+
+// Lets a stop request end a blocking read on a connection at once, and only
+// a read: a write in progress (a reply on its way to a caller) is never cut.
+// Lives no longer than the connection's lease.
+class StopGuard {
+ public:
+  StopGuard(Connection& connection, std::stop_token stop)
+      : connection_{connection}, callback_{std::move(stop), Wake{this}} {}
+  StopGuard(const StopGuard&) = delete;
+  StopGuard& operator=(const StopGuard&) = delete;
+
+  // Before a blocking read: false when a stop was requested (do not block).
+  [[nodiscard]] bool begin_blocking() {
+    std::scoped_lock lock{mutex_};
+    if (stopping_) return false;
+    blocking_ = true;
+    return true;
+  }
+  void end_blocking() {
+    std::scoped_lock lock{mutex_};
+    blocking_ = false;
+  }
+  [[nodiscard]] bool stopping() {
+    std::scoped_lock lock{mutex_};
+    return stopping_;
+  }
+
+ private:
+  struct Wake {
+    StopGuard* guard;
+    void operator()() const noexcept {
+      std::scoped_lock lock{guard->mutex_};
+      guard->stopping_ = true;
+      if (guard->blocking_) guard->connection_.interrupt();
+    }
+  };
+
+  Connection& connection_;
+  std::mutex mutex_;
+  bool blocking_ = false;
+  bool stopping_ = false;
+  std::stop_callback<Wake> callback_;  // last: registered once the rest exists
+};
+
+// What a reply says, for the few shapes the medium reads.
+inline std::string_view text(const redisReply& r) noexcept { return {r.str ? r.str : "", r.str ? r.len : 0}; }
+inline bool is_error(const redisReply& r) noexcept { return r.type == REDIS_REPLY_ERROR; }
+inline bool is_nil(const redisReply& r) noexcept { return r.type == REDIS_REPLY_NIL; }
+
+// A server's error reply as an Error naming what was being done.
+inline Error server_error(const redisReply& r, const std::string& what) {
+  const auto message = text(r);
+  const auto code = message.starts_with("WRONGTYPE") ? Errc::type_mismatch : Errc::unreachable;
+  return Error{code, what + ": the server said " + std::string{message}};
+}
+
+}  // namespace prime::optimus::detail

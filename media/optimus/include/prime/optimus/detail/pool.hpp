@@ -1,0 +1,195 @@
+#pragma once
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <cstdio>
+#include <expected>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <random>
+#include <stop_token>
+#include <string>
+#include <unistd.h>
+#include <utility>
+#include <vector>
+
+#include "prime/logic/error.hpp"
+#include "prime/logic/sample.hpp"
+#include "prime/optimus/detail/connection.hpp"
+#include "prime/optimus/options.hpp"
+
+namespace prime::optimus::detail {
+
+// Connections to one server, shared by every thread of a process that talks
+// to it: a thread leases one for what it does and gives it back. A connection
+// that broke is dropped, and so is every idle one opened before the break (the
+// server may have restarted). After a failed connect, further attempts wait
+// out a backoff that doubles up to a second, and callers meanwhile get the
+// last error at once instead of a hang.
+//
+// Thread-safe.
+class Pool : public std::enable_shared_from_this<Pool> {
+ public:
+  // A connection on loan; returned to the pool when the lease ends, unless it broke.
+  class Lease {
+   public:
+    Lease(std::shared_ptr<Pool> pool, Connection connection, std::uint64_t epoch)
+        : pool_{std::move(pool)}, connection_{std::move(connection)}, epoch_{epoch} {}
+    Lease(Lease&&) noexcept = default;
+    Lease& operator=(Lease&&) = delete;
+    Lease(const Lease&) = delete;
+    ~Lease() {
+      if (pool_ && connection_ && connection_->valid()) pool_->give_back(std::move(*connection_), epoch_);
+    }
+    Connection* operator->() noexcept { return &*connection_; }
+    Connection& operator*() noexcept { return *connection_; }
+
+    // Drops the connection without suspecting the server: for one whose
+    // socket a stop request shut down.
+    void discard() noexcept { connection_.reset(); }
+
+   private:
+    std::shared_ptr<Pool> pool_;
+    std::optional<Connection> connection_;
+    std::uint64_t epoch_;
+  };
+
+  static std::shared_ptr<Pool> make(Options options) {
+    auto endpoint = parse_url(options.url);
+    if (!endpoint) throw Failure{endpoint.error()};
+    return std::shared_ptr<Pool>{new Pool{std::move(options), std::move(*endpoint)}};
+  }
+
+  std::expected<Lease, Error> acquire() {
+    std::uint64_t epoch;
+    {
+      std::scoped_lock lock{mutex_};
+      epoch = epoch_;
+      while (!idle_.empty()) {
+        auto [connection, born] = std::move(idle_.back());
+        idle_.pop_back();
+        if (born == epoch_) return Lease{shared_from_this(), std::move(connection), born};
+      }
+      if (Clock::now() < retry_after_) return std::unexpected(last_error_);
+    }
+    auto connection = Connection::open(options_, endpoint_);
+    std::scoped_lock lock{mutex_};
+    if (!connection) {
+      last_error_ = connection.error();
+      backoff_ = std::clamp(backoff_ * 2, kFirstBackoff, kMaxBackoff);
+      retry_after_ = Clock::now() + backoff_;
+      ++epoch_;  // whatever is idle dates from before the failure
+      return std::unexpected(std::move(connection.error()));
+    }
+    backoff_ = std::chrono::milliseconds{0};
+    return Lease{shared_from_this(), std::move(*connection), epoch};
+  }
+
+  // Waits until a connection can be had, or `deadline`, or `stop`: for workers
+  // that must ride out a server restart. Sleeps between attempts.
+  std::expected<Lease, Error> acquire_until(Clock::time_point deadline, std::stop_token stop) {
+    while (true) {
+      auto lease = acquire();
+      if (lease || stop.stop_requested() || Clock::now() >= deadline) return lease;
+      std::unique_lock lock{mutex_};
+      const auto until = std::min(deadline, std::max(retry_after_, Clock::now() + kFirstBackoff));
+      wake_.wait_until(lock, stop, until, [] { return false; });
+      if (stop.stop_requested()) return std::unexpected(Error{Errc::stopped, "redis at " + options_.url + ": stopped while reconnecting"});
+    }
+  }
+
+  // Blocking calls (a chain call waiting for its answer) register here while
+  // they wait, so that stopping a core can end them: its workers may be
+  // waiting for services that are being stopped too. While closed, new calls
+  // fail at once with Errc::stopped.
+  [[nodiscard]] bool begin_call(const Connection& c) {
+    std::scoped_lock lock{calls_mutex_};
+    if (closed_) return false;
+    calls_.push_back(&c);
+    return true;
+  }
+  void end_call(const Connection& c) {
+    {
+      std::scoped_lock lock{calls_mutex_};
+      std::erase(calls_, &c);
+    }
+    calls_done_.notify_all();
+  }
+  [[nodiscard]] bool calls_closed() {
+    std::scoped_lock lock{calls_mutex_};
+    return closed_;
+  }
+  // New calls fail from now on; calls under way get `grace` to finish (their
+  // answers may be on the way), then their waits are cut.
+  void close_calls(std::chrono::milliseconds grace) {
+    std::unique_lock lock{calls_mutex_};
+    closed_ = true;
+    calls_done_.wait_for(lock, grace, [&] { return calls_.empty(); });
+    for (const auto* c : calls_) c->interrupt();
+  }
+  void reopen_calls() {
+    std::scoped_lock lock{calls_mutex_};
+    closed_ = false;
+  }
+
+  [[nodiscard]] const Options& options() const noexcept { return options_; }
+  [[nodiscard]] const std::string& url() const noexcept { return options_.url; }
+
+  // "<domain>:" followed by `name`: the only keys this medium touches.
+  [[nodiscard]] std::string key(std::string_view kind, std::string_view name) const {
+    std::string k;
+    k.reserve(options_.domain.size() + kind.size() + name.size() + 2);
+    return k.append(options_.domain).append(":").append(kind).append(name);
+  }
+
+  // A name no other process shares: for reply keys and anonymous services.
+  [[nodiscard]] const std::string& process_id() const noexcept { return process_id_; }
+  [[nodiscard]] std::uint64_t next_id() noexcept { return next_id_.fetch_add(1, std::memory_order_relaxed); }
+
+ private:
+  static constexpr std::chrono::milliseconds kFirstBackoff{10};
+  static constexpr std::chrono::milliseconds kMaxBackoff{1000};
+  static constexpr std::size_t kMaxIdle = 32;
+
+  Pool(Options options, Endpoint endpoint) : options_{std::move(options)}, endpoint_{std::move(endpoint)} {
+    std::random_device entropy;
+    const std::uint64_t r = (std::uint64_t{entropy()} << 32) ^ entropy() ^
+                            static_cast<std::uint64_t>(Clock::now().time_since_epoch().count());
+    char buffer[48];
+    const int n = std::snprintf(buffer, sizeof buffer, "%d.%016llx", static_cast<int>(::getpid()),
+                                static_cast<unsigned long long>(r));
+    process_id_.assign(buffer, static_cast<std::size_t>(n));
+  }
+
+  void give_back(Connection connection, std::uint64_t born) {
+    std::scoped_lock lock{mutex_};
+    if (connection.broken()) {
+      ++epoch_;  // the server may have gone: do not trust the idle ones either
+      return;
+    }
+    if (connection.pending() > 0) return;  // replies still due: not reusable
+    if (born == epoch_ && idle_.size() < kMaxIdle) idle_.emplace_back(std::move(connection), born);
+  }
+
+  const Options options_;
+  const Endpoint endpoint_;
+  std::string process_id_;
+  std::atomic<std::uint64_t> next_id_{1};
+  std::mutex mutex_;
+  std::condition_variable_any wake_;
+  std::vector<std::pair<Connection, std::uint64_t>> idle_;
+  std::uint64_t epoch_ = 0;
+  std::chrono::milliseconds backoff_{0};
+  Clock::time_point retry_after_{};
+  Error last_error_{Errc::unreachable, ""};
+  std::mutex calls_mutex_;
+  std::condition_variable calls_done_;
+  std::vector<const Connection*> calls_;
+  bool closed_ = false;
+};
+
+}  // namespace prime::optimus::detail

@@ -1,0 +1,147 @@
+#pragma once
+
+#include <chrono>
+#include <exception>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <stop_token>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "prime/logic/block.hpp"
+#include "prime/logic/error.hpp"
+#include "prime/optimus/codec.hpp"
+#include "prime/optimus/detail/connection.hpp"
+#include "prime/optimus/detail/envelope.hpp"
+#include "prime/optimus/detail/keys.hpp"
+#include "prime/optimus/detail/pool.hpp"
+#include "prime/topology/detail/runtime_state.hpp"
+
+namespace prime::optimus::detail {
+
+// Runs a block on an encoded input: the encoded output, or the error to send
+// back. An exception from the block becomes an error; a prime::Failure keeps
+// its code and message.
+template <class In, class F>
+std::expected<std::string, Error> run_block(const F& block, std::string_view payload, const std::string& where) {
+  auto in = decode_message<In>(payload, where + ", request");
+  if (!in) return std::unexpected(std::move(in.error()));
+  try {
+    return encode_message(std::invoke(block, std::move(*in)));
+  } catch (const Failure& f) {
+    return std::unexpected(f.error());
+  } catch (const std::exception& e) {
+    return std::unexpected(Error{Errc::block_failed, where + ": " + e.what()});
+  } catch (...) {
+    return std::unexpected(Error{Errc::block_failed, where + ": an exception of unknown type"});
+  }
+}
+
+// One worker of a service: waits on the request key, runs the block, and
+// sends the result on (the next service of the request's route) or back (the
+// caller's reply key). Runs until `stop`; rides out a lost server by
+// reconnecting with backoff. What it sends is pipelined with its next wait,
+// so a busy worker makes one round trip per request.
+template <class In, class F>
+void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, const std::string& key,
+                    const F& block, const std::weak_ptr<prime::detail::RuntimeState>& runtime, std::stop_token stop) {
+  const std::string where = "service '" + name + "'";
+  const std::string alive = alive_key(key);
+  const std::string alive_ms = std::to_string(kAliveFor.count());
+  const std::string wait = seconds_text(kWaitSlice);
+  const auto report = [&](Error error) {
+    if (auto r = runtime.lock()) r->report(std::move(error));
+  };
+  std::vector<std::vector<std::string>> outbox;  // commands to send with the next wait
+
+  while (!stop.stop_requested()) {
+    auto lease = pool->acquire_until(Clock::time_point::max(), stop);
+    if (!lease) return;  // stopped
+    auto& connection = **lease;
+    StopGuard guard{connection, stop};
+    Clock::time_point refreshed{};
+    while (true) {
+      std::size_t queued = 0;
+      for (const auto& command : outbox) {
+        std::vector<std::string_view> args{command.begin(), command.end()};
+        connection.append(args);
+        ++queued;
+      }
+      outbox.clear();
+      const bool stopping = guard.stopping();
+      if (!stopping && Clock::now() - refreshed >= kAliveRefresh) {
+        connection.append({"SET", alive, "1", "PX", alive_ms});
+        ++queued;
+        refreshed = Clock::now();
+      }
+      if (!stopping) {
+        connection.set_timeout(kWaitSlice + kSocketMargin);
+        connection.append({"BLPOP", key, wait});
+      }
+      if (!connection.flush()) break;
+      bool ok = true;
+      for (; queued > 0; --queued) {
+        auto r = connection.reply();
+        if (!r) {
+          ok = false;
+          break;
+        }
+        if (is_error(**r)) report(server_error(**r, where + ": sending a result"));
+      }
+      if (!ok) break;
+      if (stopping) {
+        lease->discard();
+        return;
+      }
+      if (!guard.begin_blocking()) {
+        lease->discard();  // a BLPOP is under way on it
+        return;
+      }
+      auto got = connection.reply();
+      guard.end_blocking();
+      if (!got) break;
+      if (is_error(**got)) {
+        report(server_error(**got, where + ": waiting for requests"));
+        break;
+      }
+      if (is_nil(**got) || (**got).type != REDIS_REPLY_ARRAY || (**got).elements != 2) continue;
+
+      auto request = decode_request(text(*(**got).element[1]));
+      if (!request) {
+        report({Errc::type_mismatch, where + ": request key '" + key + "' held " + request.error() + "; dropped"});
+        continue;
+      }
+      if (request->deadline_ms != 0 &&
+          system_ms(std::chrono::system_clock::now()) > request->deadline_ms)
+        continue;  // its caller has given up: running it would answer nobody
+      auto result = run_block<In>(block, request->payload, where);
+      if (result && !request->route.empty()) {
+        std::string forwarded;
+        forwarded.reserve(result->size() + request->reply_key.size() + 64);
+        const std::span<const std::string> rest{request->route.data() + 1, request->route.size() - 1};
+        encode_request(request->id, request->reply_key, rest, request->deadline_ms, *result, forwarded);
+        outbox.push_back({"RPUSH", request->route.front(), std::move(forwarded)});
+        continue;
+      }
+      std::string response;
+      if (result)
+        encode_response(request->id, std::nullopt, {}, *result, response);
+      else
+        encode_response(request->id, result.error().code, result.error().message, {}, response);
+      // An answer nobody takes (its caller gave up) goes away by itself.
+      const auto left = request->deadline_ms - system_ms(std::chrono::system_clock::now());
+      const auto ttl = std::to_string(std::max<std::int64_t>(left, 0) + 10'000);
+      outbox.push_back({"RPUSH", request->reply_key, std::move(response)});
+      outbox.push_back({"PEXPIRE", request->reply_key, ttl});
+    }
+    if (stop.stop_requested()) {
+      lease->discard();
+      return;
+    }
+    report({Errc::unreachable, where + ": lost " + pool->url() + "; reconnecting"});
+  }
+}
+
+}  // namespace prime::optimus::detail

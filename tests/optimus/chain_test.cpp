@@ -1,0 +1,211 @@
+// Services and the chains that call them, in one process (other tests put
+// them in processes of their own).
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <mutex>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "optimus/support/optimus_fixture.hpp"
+#include "prime/liberty.hpp"
+#include "support/failure.hpp"
+
+namespace prime::test {
+namespace {
+
+using OptimusChain = OptimusTest;
+
+TEST_F(OptimusChain, AChainCallsItsBlockAsAServiceThroughTheServer) {
+  optimus::Core core{options()};
+  std::atomic<std::thread::id> ran_on;
+  auto twice = core.chain([&](int x) {
+    ran_on = std::this_thread::get_id();
+    return 2 * x;
+  });
+  EXPECT_EQ(twice(21), 42);
+  EXPECT_NE(ran_on.load(), std::this_thread::get_id()) << "the block ran in the service's worker";
+  auto answer = twice.call(5, Clock::now() + 1s);
+  ASSERT_TRUE(answer) << answer.error().describe();
+  EXPECT_EQ(*answer, 10);
+}
+
+TEST_F(OptimusChain, AServiceHostedByOneCoreIsCalledByNameFromAnother) {
+  optimus::Core host{options()};
+  optimus::Core caller{options()};
+  (void)host.serve("planner", [](std::string goal) { return "path to " + goal; });
+  auto planner = caller.service<std::string, std::string>("planner", {.timeout = 2000ms});
+  EXPECT_EQ(planner("dock"), "path to dock");
+  EXPECT_EQ(planner.graph().text(), "planner [service, optimus]\n");
+}
+
+TEST_F(OptimusChain, LinkedServicesPassTheDataOnWithoutTheCaller) {
+  RedisServer own;  // counted commands must be this test's alone
+  optimus::Core core{optimus::Options{.url = own.url(), .domain = domain}};
+  auto add_one = core.serve("add_one", [](int x) { return x + 1; });
+  auto times_ten = core.serve("times_ten", [](int x) { return x * 10; });
+  auto linked = add_one | times_ten;
+  static_assert(std::same_as<decltype(linked), optimus::Chain<int, int>>, "linking keeps the medium's own chain");
+  RawRedis raw{own.url()};
+  const auto pushes = [&] {
+    auto stats = raw.text({"INFO", "commandstats"});
+    const auto at = stats.find("cmdstat_rpush:calls=");
+    return at == std::string::npos ? 0 : std::stoi(stats.substr(at + 20));
+  };
+  constexpr int kCalls = 20;
+  int before = pushes();
+  for (int i = 0; i < kCalls; ++i) ASSERT_EQ(linked(i), (i + 1) * 10);
+  const int linked_pushes = pushes() - before;
+  before = pushes();
+  for (int i = 0; i < kCalls; ++i) ASSERT_EQ(times_ten(add_one(i)), (i + 1) * 10);
+  const int routed_pushes = pushes() - before;
+  // Linked: request -> add_one -> times_ten -> reply. Caller-routed: a
+  // request and a reply per service.
+  EXPECT_EQ(linked_pushes, 3 * kCalls);
+  EXPECT_EQ(routed_pushes, 4 * kCalls);
+  EXPECT_EQ(linked.graph().text(), "add_one [service, optimus] -> times_ten [service, optimus]\n");
+}
+
+TEST_F(OptimusChain, ManyConcurrentCallersNeverGetEachOthersAnswers) {
+  optimus::Core host{options()};
+  optimus::Core callers{options()};
+  (void)host.serve("tag", [](std::int64_t x) { return x * 1000 + 7; }, {.workers = 3});
+  auto tag = callers.service<std::int64_t, std::int64_t>("tag");
+  constexpr int kThreads = 8, kCalls = 150;
+  std::atomic<int> wrong{0}, failed{0};
+  {
+    std::vector<std::jthread> threads;
+    for (int t = 0; t < kThreads; ++t)
+      threads.emplace_back([&, t] {
+        for (int i = 0; i < kCalls; ++i) {
+          const std::int64_t in = t * 100'000 + i;
+          auto out = tag.call(in);
+          if (!out)
+            ++failed;
+          else if (*out != in * 1000 + 7)
+            ++wrong;
+        }
+      });
+  }
+  EXPECT_EQ(wrong, 0);
+  EXPECT_EQ(failed, 0);
+}
+
+TEST_F(OptimusChain, ABlockThatThrowsIsAnErrorForTheCallerAndTheServiceKeepsServing) {
+  optimus::Core core{options()};
+  auto checked = core.chain(
+      [](int x) {
+        if (x < 0) throw std::invalid_argument{"negative range"};
+        return x;
+      },
+      "check");
+  EXPECT_TRUE(fails_with([&] { (void)checked(-1); }, Errc::block_failed, "service 'check': negative range"));
+  auto answer = checked.call(-2);
+  ASSERT_FALSE(answer);
+  EXPECT_EQ(answer.error().code, Errc::block_failed);
+  EXPECT_EQ(checked(3), 3) << "the service kept serving";
+  // A prime::Failure thrown by a block keeps its code.
+  auto empty = core.chain([](int) -> int { throw Failure{{Errc::no_data, "nothing yet"}}; });
+  EXPECT_TRUE(fails_with([&] { (void)empty(1); }, Errc::no_data, "nothing yet"));
+}
+
+TEST_F(OptimusChain, AFailureInTheMiddleOfALinkedRouteReachesTheCaller) {
+  optimus::Core core{options()};
+  auto route = core.chain([](int x) { return x + 1; }, "first") |
+               core.chain([](int x) -> int { if (x == 2) throw std::runtime_error{"two"}; return x; }, "second") |
+               core.chain([](int x) { return x * 2; }, "third");
+  EXPECT_EQ(route(5), 12);
+  EXPECT_TRUE(fails_with([&] { (void)route(1); }, Errc::block_failed, "service 'second': two"));
+  EXPECT_EQ(route(6), 14);
+}
+
+TEST_F(OptimusChain, EveryCallHasADeadline) {
+  optimus::Core core{options()};
+  auto slow = core.chain([](int x) {
+    std::this_thread::sleep_for(300ms);
+    return x;
+  });
+  const auto t0 = Clock::now();
+  auto late = slow.call(1, Clock::now() + 50ms);
+  ASSERT_FALSE(late);
+  EXPECT_EQ(late.error().code, Errc::timeout);
+  EXPECT_LT(Clock::now() - t0, 250ms);
+  EXPECT_EQ(slow.with_timeout(2000ms)(2), 2) << "the late answer to the first call went to that call's key, not here";
+}
+
+TEST_F(OptimusChain, CallingAServiceNobodyServesIsPeerDeadNamingIt) {
+  optimus::Core core{options()};
+  auto nobody = core.service<int, int>("nobody", {.timeout = 50ms});
+  auto answer = nobody.call(1);
+  ASSERT_FALSE(answer);
+  EXPECT_EQ(answer.error().code, Errc::peer_dead) << answer.error().describe();
+  EXPECT_NE(answer.error().message.find("'nobody'"), std::string::npos);
+  RawRedis raw{shared_redis().url()};
+  EXPECT_EQ(raw.integer({"LLEN", domain + ":svc:nobody"}), 0) << "the unanswered request was withdrawn";
+}
+
+TEST_F(OptimusChain, AServiceNameTakenWithOtherTypesIsATypeMismatch) {
+  optimus::Core core{options()};
+  (void)core.serve("planner", [](int x) { return x; });
+  EXPECT_TRUE(fails_with([&] { (void)core.service<std::string, int>("planner"); }, Errc::type_mismatch, "service 'planner'"));
+  EXPECT_TRUE(fails_with([&] { (void)core.serve("planner", [](double x) { return x; }); }, Errc::type_mismatch, "service 'planner'"));
+  EXPECT_NO_THROW(((void)core.service<int, int>("planner")));
+}
+
+TEST_F(OptimusChain, GarbageInARequestKeyIsReportedAndTheServiceKeepsServing) {
+  optimus::Core core{options()};
+  auto errors = core.errors().subscribe();
+  auto echo = core.serve("echo", [](int x) { return x; });
+  RawRedis raw{shared_redis().url()};
+  raw.command({"RPUSH", domain + ":svc:echo", "definitely not a request"});
+  auto report = errors.read_for(5s);
+  ASSERT_TRUE(report);
+  EXPECT_EQ(report->value.code, Errc::type_mismatch);
+  EXPECT_NE(report->value.message.find("service 'echo'"), std::string::npos) << report->value.message;
+  EXPECT_EQ(echo(9), 9);
+}
+
+TEST_F(OptimusChain, AMessageOfTheWrongTypeIsATypeMismatchFromTheService) {
+  optimus::Core core{options()};
+  (void)core.serve("ints", [](int x) { return x; });
+  // A caller that bypasses the registry check: its chain claims doubles.
+  optimus::Chain<double, int> forged{{optimus::detail::Segment{optimus::detail::Pool::make(options()),
+                                                               {domain + ":svc:ints"}, {"ints"}}},
+                                     Graph{}, 2000ms};
+  EXPECT_TRUE(fails_with([&] { (void)forged(1.5); }, Errc::type_mismatch, "service 'ints'"));
+}
+
+// Issue 4, point 7: an Optimus service called from inside a Liberty chain.
+TEST_F(OptimusChain, AnOptimusServiceRunsInsideALibertyChain) {
+  optimus::Core redis{options()};
+  liberty::Core local;
+  (void)redis.serve("localize", [](int scan) { return scan * 10; });
+  auto localize = redis.service<int, int>("localize", {.timeout = 2000ms});
+  auto loop = local.chain([](int x) { return x + 1; }, "filter") | localize | local.chain([](int pose) { return pose - 3; }, "control");
+  EXPECT_EQ(loop(4), 47);
+  const auto text = loop.graph().text();
+  EXPECT_NE(text.find("filter [chain, liberty] -> localize [service, optimus]"), std::string::npos) << text;
+  // Or inside a Liberty block, for a step that decides at run time whether to ask.
+  auto ask = local.chain([localize](int x) { return x > 0 ? localize(x) : 0; });
+  EXPECT_EQ(ask(2), 20);
+  EXPECT_EQ(ask(-2), 0);
+}
+
+TEST_F(OptimusChain, DestroyingTheCoreStopsItsServices) {
+  auto core = std::make_unique<optimus::Core>(options());
+  auto twice = core->chain([](int x) { return 2 * x; });
+  EXPECT_EQ(twice(1), 2);
+  const auto t0 = Clock::now();
+  core.reset();
+  EXPECT_LT(Clock::now() - t0, 2s) << "a stop ends the workers' waits at once";
+  auto after = twice.with_timeout(100ms).call(1);
+  ASSERT_FALSE(after);
+  EXPECT_TRUE(after.error().code == Errc::peer_dead || after.error().code == Errc::timeout) << after.error().describe();
+}
+
+}  // namespace
+}  // namespace prime::test

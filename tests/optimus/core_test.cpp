@@ -1,0 +1,100 @@
+// Reaching the server: URLs, AUTH, Unix sockets, domains, and what an
+// unreachable server looks like.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <string>
+
+#include "optimus/support/optimus_fixture.hpp"
+#include "support/failure.hpp"
+
+namespace prime::test {
+namespace {
+
+using OptimusCore = OptimusTest;
+
+TEST_F(OptimusCore, ABadUrlIsRefusedByName) {
+  EXPECT_TRUE(fails_with([] { optimus::Core core{"http://127.0.0.1:6379"}; }, Errc::unreachable, "'http://127.0.0.1:6379'"));
+  EXPECT_TRUE(fails_with([] { optimus::Core core{"tcp://127.0.0.1:http"}; }, Errc::unreachable, "port"));
+  EXPECT_TRUE(fails_with([] { optimus::Core core{"unix://relative/path"}; }, Errc::unreachable, "absolute"));
+}
+
+TEST_F(OptimusCore, AnUnreachableServerIsAnErrorNamingTheUrlNotAHang) {
+  // A port nobody listens on: a server stopped for good.
+  int port;
+  {
+    RedisServer gone;
+    port = gone.port();
+  }
+  const auto url = "tcp://127.0.0.1:" + std::to_string(port);
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_TRUE(fails_with([&] { optimus::Core core{url}; }, Errc::unreachable, url));
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
+}
+
+TEST_F(OptimusCore, ConnectsOverAUnixSocket) {
+  optimus::Core core{optimus::Options{.url = shared_redis().unix_url(), .domain = domain}};
+  EXPECT_EQ(core.chain([](int x) { return x + 1; })(41), 42);
+}
+
+TEST_F(OptimusCore, AuthenticatesWithAPassword) {
+  RedisServer locked{{.extra = {"--requirepass", "s3cret"}}};
+  EXPECT_TRUE(fails_with([&] { optimus::Core core{locked.url()}; }, Errc::unreachable, "NOAUTH"));
+  EXPECT_TRUE(fails_with([&] { optimus::Core core{optimus::Options{.url = locked.url(), .password = "wrong"}}; },
+                         Errc::unreachable, "refused AUTH"));
+  optimus::Core core{optimus::Options{.url = locked.url(), .password = "s3cret", .domain = domain}};
+  EXPECT_EQ(core.chain([](int x) { return x * 3; })(5), 15);
+}
+
+// An ACL user that may touch only keys under "robot:" (and may not flush):
+// everything the medium does works there, so it touches nothing outside its
+// domain; a core whose domain lies outside is refused by the server.
+TEST_F(OptimusCore, WorksForAnAclUserConfinedToItsDomain) {
+  RedisServer acl{{.extra = {"--user", "robot", "on", ">pw", "~robot:*", "&*", "+@all", "-flushall", "-flushdb",
+                             "--user", "default", "off"}}};
+  optimus::Options options{.url = acl.url(), .username = "robot", .password = "pw", .domain = "robot"};
+  optimus::Core core{options};
+  auto pipeline = core.chain([](int x) { return x + 1; }) | core.serve("twice", [](int x) { return 2 * x; });
+  EXPECT_EQ(pipeline(20), 42);
+  auto caller = core.service<int, int>("twice");
+  EXPECT_EQ(caller(4), 8);
+  Event<int> lidar;
+  auto scans = core.source(lidar, "lidar", {.capacity = 4});
+  auto reader = scans.subscribe();
+  auto cmds = core.publisher<int>("cmds", {.capacity = 2, .overflow = Overflow::block});
+  auto cmd_reader = cmds.source().subscribe({.capacity = 2, .overflow = Overflow::block});
+  for (int i = 0; i < 6; ++i) lidar.emit(i);
+  ASSERT_TRUE(cmds.publish(7));
+  EXPECT_EQ(reader.read_all().size(), 4u);
+  EXPECT_EQ(reader.lost(), 2u);
+  EXPECT_EQ(cmd_reader.try_read()->value, 7);
+
+  options.domain = "elsewhere";
+  optimus::Core outsider{options};  // connecting is allowed; touching keys is not
+  EXPECT_TRUE(fails_with([&] { (void)outsider.service<int, int>("twice"); }, Errc::unreachable, "NOPERM"));
+}
+
+TEST_F(OptimusCore, DomainsSharingAServerDoNotSeeEachOther) {
+  optimus::Core a{optimus::Options{.url = shared_redis().url(), .domain = domain + "-a"}};
+  optimus::Core b{optimus::Options{.url = shared_redis().url(), .domain = domain + "-b"}};
+  (void)a.serve("step", [](int x) { return x + 1; });
+  (void)b.serve("step", [](int x) { return x - 1; });
+  EXPECT_EQ((a.service<int, int>("step")(10)), 11);
+  EXPECT_EQ((b.service<int, int>("step")(10)), 9);
+  RawRedis raw{shared_redis().url()};
+  auto keys = raw.command({"KEYS", domain + "-*"});
+  ASSERT_GT(keys->elements, 0u);
+  for (std::size_t i = 0; i < keys->elements; ++i) {
+    const auto key = optimus::detail::text(*keys->element[i]);
+    EXPECT_TRUE(key.starts_with(domain + "-a:") || key.starts_with(domain + "-b:")) << key;
+  }
+}
+
+TEST_F(OptimusCore, IsAMediumNamedOptimus) {
+  optimus::Core core{options()};
+  EXPECT_EQ(core.medium(), "optimus");
+  static_assert(Medium<optimus::Core>);
+}
+
+}  // namespace
+}  // namespace prime::test

@@ -1,0 +1,93 @@
+// Services and sources in processes of their own (optimus_service_helper),
+// on a real redis-server.
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <chrono>
+#include <string>
+#include <vector>
+
+#include "optimus/support/child_process.hpp"
+#include "optimus/support/optimus_fixture.hpp"
+#include "support/failure.hpp"
+
+namespace prime::test {
+namespace {
+
+class OptimusProcess : public OptimusTest {
+ protected:
+  ChildProcess helper(const std::vector<std::string>& role) {
+    std::vector<std::string> argv{PRIME_OPTIMUS_HELPER, shared_redis().url(), domain};
+    argv.insert(argv.end(), role.begin(), role.end());
+    ChildProcess child{argv};
+    if (!child.wait_for_line("ready", 20s)) throw std::runtime_error{"the helper did not get ready"};
+    return child;
+  }
+};
+
+TEST_F(OptimusProcess, AServiceInAnotherProcessIsCalledByName) {
+  auto services = helper({"serve"});
+  optimus::Core core{options()};
+  auto twice = core.service<int, int>("double", {.timeout = 5000ms});
+  EXPECT_EQ(twice(21), 42);
+  const int pid = core.service<int, int>("whoami")(0);
+  EXPECT_EQ(pid, services.pid());
+  EXPECT_NE(pid, ::getpid());
+}
+
+TEST_F(OptimusProcess, LinkedServicesOfAnotherProcessPassDataWithoutTheCaller) {
+  auto services = helper({"serve"});
+  optimus::Core core{options()};
+  auto pipeline = core.service<int, int>("add_one") | core.service<int, int>("times_ten") |
+                  core.chain([](int x) { return x - 1; }, "local");
+  EXPECT_EQ(pipeline(4), 49);
+}
+
+TEST_F(OptimusProcess, ABlockThatThrowsInAnotherProcessIsAnErrorHere) {
+  auto services = helper({"serve"});
+  optimus::Core core{options()};
+  auto failing = core.service<int, int>("fail");
+  EXPECT_TRUE(fails_with([&] { (void)failing(3); }, Errc::block_failed, "failing on 3"));
+  EXPECT_EQ((core.service<int, int>("double")(2)), 4) << "the process keeps serving";
+}
+
+TEST_F(OptimusProcess, AServiceProcessKilledAndRestartedIsFoundAgain) {
+  optimus::Core core{options()};
+  auto whoami = core.service<int, int>("whoami", {.timeout = 300ms});
+  auto first = helper({"serve"});
+  const pid_t first_pid = first.pid();
+  EXPECT_EQ(whoami(0), first_pid);
+
+  first.kill();  // kill -9: no goodbye
+  auto meanwhile = whoami.call(0);
+  ASSERT_FALSE(meanwhile);
+  EXPECT_TRUE(meanwhile.error().code == Errc::timeout || meanwhile.error().code == Errc::peer_dead)
+      << meanwhile.error().describe();
+
+  auto second = helper({"serve"});
+  auto again = whoami.with_timeout(5000ms).call(0);
+  ASSERT_TRUE(again) << again.error().describe();
+  EXPECT_EQ(*again, second.pid());
+  EXPECT_NE(*again, first_pid);
+  RawRedis raw{shared_redis().url()};
+  EXPECT_EQ(raw.integer({"LLEN", domain + ":svc:whoami"}), 0) << "no stale request was left for the new process";
+}
+
+TEST_F(OptimusProcess, ASourcePublishedByAnotherProcessIsReadHere) {
+  auto publisher = helper({"publish", "imu"});
+  optimus::Core core{options()};
+  auto imu = core.subscribe<int>("imu", {.capacity = 1000});
+  auto reader = imu.subscribe();
+  publisher.send_line("go 100");
+  ASSERT_TRUE(publisher.wait_for_line("published 100", 20s));
+  auto values = reader.read_all();
+  ASSERT_EQ(values.size(), 100u);
+  for (int i = 0; i < 100; ++i) EXPECT_EQ(values[static_cast<std::size_t>(i)].value, i);
+  EXPECT_EQ(reader.lost(), 0u);
+  // A type it does not carry is refused by name.
+  EXPECT_TRUE(fails_with([&] { (void)core.subscribe<double>("imu"); }, Errc::type_mismatch, "source 'imu'"));
+}
+
+}  // namespace
+}  // namespace prime::test
