@@ -125,8 +125,10 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   }
 
   std::expected<Sample<View<T>>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
-    if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
-    return *try_read();
+    while (true) {  // a sample overwritten between the wait and the take sends it back to waiting
+      if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
+      if (auto sample = try_read()) return std::move(*sample);
+    }
   }
 
   std::expected<std::size_t, Error> read_some(std::vector<Sample<View<T>>>& out, std::size_t max,
