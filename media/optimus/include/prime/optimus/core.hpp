@@ -19,7 +19,7 @@
 #include "prime/optimus/detail/pool.hpp"
 #include "prime/optimus/detail/registry.hpp"
 #include "prime/optimus/detail/service.hpp"
-#include "prime/optimus/detail/stream.hpp"
+#include "prime/optimus/detail/stream_writer.hpp"
 #include "prime/optimus/options.hpp"
 #include "prime/optimus/source.hpp"
 #include "prime/topology/concepts.hpp"

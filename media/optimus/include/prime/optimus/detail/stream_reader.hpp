@@ -1,0 +1,244 @@
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <expected>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <stop_token>
+#include <string>
+#include <string_view>
+#include <utility>
+
+#include "prime/logic/error.hpp"
+#include "prime/logic/reader.hpp"
+#include "prime/logic/sample.hpp"
+#include "prime/optimus/codec.hpp"
+#include "prime/optimus/detail/connection.hpp"
+#include "prime/optimus/detail/keys.hpp"
+#include "prime/optimus/detail/pool.hpp"
+#include "prime/optimus/detail/stream_protocol.hpp"
+#include "prime/optimus/detail/stream_writer.hpp"
+#include "prime/topology/qos.hpp"
+
+// The reading side of a source's stream.
+
+namespace prime::optimus::detail {
+
+// One reader of a source's stream, with its own cursor. Values come in
+// batches (one round trip for up to `capacity` values). Under drop_oldest a
+// batch is the newest `capacity` unread values, and what was skipped or
+// trimmed away is counted from the gaps in the sequence numbers; under block
+// the reader registers its cursor so writers wait for it.
+//
+// Not thread-safe (one thread at a time, as every Reader).
+template <class T>
+class StreamReader final : public Reader<T>::Impl {
+ public:
+  StreamReader(std::shared_ptr<StreamState> state, const Qos& qos)
+      : state_{std::move(state)}, qos_{qos}, block_{qos.overflow == Overflow::block} {
+    if (qos_.capacity == 0)
+      throw Failure{{Errc::limit_exceeded, "source '" + state_->name() + "': capacity must be at least 1"}};
+    reader_id_ = state_->pool().process_id() + "." + std::to_string(state_->pool().next_id());
+    reader_field_ = reader_field(reader_id_);
+    lost_field_ = lost_field(reader_id_);
+    capacity_ = std::to_string(std::min(qos_.capacity, state_->qos().capacity));
+    auto lease = state_->pool().acquire();
+    if (!lease) throw Failure{state_->named(lease.error())};
+    auto& c = **lease;
+    c.set_timeout(state_->command_timeout());
+    auto last = c.command({"XREVRANGE", state_->key(), "+", "-", "COUNT", "1"});
+    if (!last) throw Failure{state_->named(last.error())};
+    if (is_error(**last)) throw Failure{server_error(**last, "source '" + state_->name() + "': subscribing")};
+    if ((**last).type == REDIS_REPLY_ARRAY && (**last).elements == 1) {
+      if (const auto entry = stream_entry(*(**last).element[0])) {
+        cursor_ = std::string{entry->id};
+        if (auto n = entry_field(*entry->fields, "n")) parse_number(*n, seq_);
+      }
+    }
+    if (block_) {
+      auto registered = c.command({"HSET", state_->readers_key(), reader_field_, progress()});
+      if (!registered) throw Failure{state_->named(registered.error())};
+    }
+  }
+  StreamReader(const StreamReader&) = delete;
+  StreamReader& operator=(const StreamReader&) = delete;
+
+  ~StreamReader() override {
+    if (!block_) return;
+    if (auto lease = state_->pool().acquire()) {
+      (*lease)->set_timeout(state_->command_timeout());
+      (void)(*lease)->command({"HDEL", state_->readers_key(), reader_field_, lost_field_});
+    }
+  }
+
+  std::optional<Sample<T>> try_read() override {
+    if (cache_.empty()) {
+      if (auto fetched = fetch(); !fetched) state_->report(fetched.error());
+    }
+    return pop();
+  }
+
+  std::expected<Sample<T>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
+    while (true) {
+      if (auto value = pop()) return std::move(*value);
+      if (stop.stop_requested()) return std::unexpected(stopped());
+      auto fetched = fetch();
+      if (fetched && !cache_.empty()) continue;
+      const auto now = Clock::now();
+      if (!fetched) {
+        if (now >= deadline) return std::unexpected(std::move(fetched.error()));
+        if (!pause(std::min(deadline, now + std::chrono::milliseconds{50}), stop)) return std::unexpected(stopped());
+        continue;
+      }
+      if (now >= deadline) return std::unexpected(timed_out());
+      auto waited = wait(std::min<Clock::duration>(deadline - now, kWaitSlice), stop);
+      if (stop.stop_requested()) return std::unexpected(stopped());
+      if (!waited) {
+        if (Clock::now() >= deadline) return std::unexpected(std::move(waited.error()));
+        if (!pause(std::min(deadline, Clock::now() + std::chrono::milliseconds{50}), stop)) return std::unexpected(stopped());
+      }
+    }
+  }
+
+  [[nodiscard]] std::uint64_t lost() const override {
+    std::uint64_t dropped = 0;
+    if (block_) {
+      if (auto lease = state_->pool().acquire()) {
+        (*lease)->set_timeout(state_->command_timeout());
+        if (auto r = (*lease)->command({"HGET", state_->readers_key(), lost_field_}); r && !is_nil(**r))
+          parse_number(text(**r), dropped);
+      }
+    }
+    return lost_ + dropped;
+  }
+
+ private:
+  std::optional<Sample<T>> pop() {
+    if (cache_.empty()) return std::nullopt;
+    auto sample = std::move(cache_.front());
+    cache_.pop_front();
+    return sample;
+  }
+
+  std::string progress() const { return reader_progress(seq_, capacity_); }
+  Error stopped() const { return {Errc::stopped, "source '" + state_->name() + "': the reader was stopped"}; }
+  Error timed_out() const { return {Errc::timeout, "source '" + state_->name() + "': no value before the deadline"}; }
+
+  // Without waiting: the unread values (drop_oldest: the newest `capacity`
+  // of them; block: the oldest `capacity`), into the cache.
+  std::expected<void, Error> fetch() {
+    auto lease = state_->pool().acquire();
+    if (!lease) return std::unexpected(state_->named(lease.error()));
+    auto& c = **lease;
+    c.set_timeout(state_->command_timeout());
+    const std::string after = cursor_ == "0-0" ? std::string{"-"} : "(" + cursor_;
+    if (block_) {
+      c.append({"HSET", state_->readers_key(), reader_field_, progress()});
+      c.append({"XRANGE", state_->key(), after, "+", "COUNT", capacity_});
+    } else {
+      c.append({"XREVRANGE", state_->key(), "+", after, "COUNT", capacity_});
+    }
+    if (block_) {
+      auto registered = c.reply();
+      if (!registered) return std::unexpected(state_->named(registered.error()));
+    }
+    auto entries = c.reply();
+    if (!entries) return std::unexpected(state_->named(entries.error()));
+    if (is_error(**entries)) return std::unexpected(server_error(**entries, "source '" + state_->name() + "': reading"));
+    take(**entries, !block_);
+    return {};
+  }
+
+  // Waits up to `timeout` for a value to arrive; a stop request ends it at once.
+  std::expected<void, Error> wait(Clock::duration timeout, std::stop_token stop) {
+    auto lease = state_->pool().acquire();
+    if (!lease) return std::unexpected(state_->named(lease.error()));
+    auto& c = **lease;
+    const auto block_for = std::chrono::duration_cast<std::chrono::milliseconds>(timeout);
+    const auto ms = std::to_string(std::max<std::int64_t>(block_for.count(), 1));
+    c.set_timeout(std::chrono::duration_cast<std::chrono::microseconds>(block_for) + kSocketMargin);
+    StopGuard guard{c, stop};
+    if (block_) c.append({"HSET", state_->readers_key(), reader_field_, progress()});
+    c.append({"XREAD", "COUNT", capacity_, "BLOCK", ms, "STREAMS", state_->key(), cursor_});
+    if (!c.flush()) return std::unexpected(state_->named(Error{Errc::unreachable, "redis at " + c.url() + ": connection lost"}));
+    if (block_) {
+      auto registered = c.reply();
+      if (!registered) return std::unexpected(state_->named(registered.error()));
+    }
+    if (!guard.begin_blocking()) {
+      lease->discard();
+      return {};
+    }
+    auto got = c.reply();
+    guard.end_blocking();
+    if (!got) {
+      if (stop.stop_requested()) lease->discard();
+      return std::unexpected(state_->named(got.error()));
+    }
+    if (is_error(**got)) return std::unexpected(server_error(**got, "source '" + state_->name() + "': waiting"));
+    if (is_nil(**got) || (**got).type != REDIS_REPLY_ARRAY || (**got).elements != 1) return {};
+    const auto& stream = *(**got).element[0];
+    if (stream.type == REDIS_REPLY_ARRAY && stream.elements == 2) take(*stream.element[1], false);
+    return {};
+  }
+
+  // Takes a reply's entries (newest first when `reversed`) into the cache.
+  void take(const redisReply& entries, bool reversed) {
+    if (entries.type != REDIS_REPLY_ARRAY) return;
+    const auto n = entries.elements;
+    for (std::size_t k = 0; k < n; ++k) {
+      const auto entry = stream_entry(*entries.element[reversed ? n - 1 - k : k]);
+      if (!entry) continue;
+      cursor_ = std::string{entry->id};
+      const auto fields = entry_fields(*entry->fields);
+      if (!fields) {
+        ++lost_;
+        state_->report({Errc::type_mismatch, "source '" + state_->name() + "': entry " + std::string{entry->id} + " of '" +
+                                                 state_->key() + "' is not a Prime entry; skipped"});
+        continue;
+      }
+      const auto seq = fields->seq;
+      if (seq > seq_ + 1) lost_ += seq - seq_ - 1;  // trimmed away, or skipped for the newest
+      // seq <= seq_: the stream began again (a server restart): nothing to count.
+      seq_ = seq;
+      if (block_ && fields->dropped_for_reader(reader_id_))
+        continue;  // dropped for this reader by a writer it kept waiting; counted by the writer
+      auto value = decode_message<T>(fields->message, "source '" + state_->name() + "', key '" + state_->key() + "'");
+      if (!value) {
+        ++lost_;
+        state_->report(value.error());
+        continue;
+      }
+      cache_.push_back(Sample<T>{std::move(*value), Clock::time_point{std::chrono::nanoseconds{fields->stamp_ns}}});
+    }
+  }
+
+  // Sleeps until `until`; false when a stop request ended it.
+  bool pause(Clock::time_point until, std::stop_token stop) {
+    std::mutex m;
+    std::condition_variable_any cv;
+    std::unique_lock lock{m};
+    cv.wait_until(lock, stop, until, [] { return false; });
+    return !stop.stop_requested();
+  }
+
+  std::shared_ptr<StreamState> state_;  // a reader keeps its source (and what feeds it) alive
+  const Qos qos_;
+  const bool block_;
+  std::string reader_id_;
+  std::string reader_field_;
+  std::string lost_field_;
+  std::string capacity_;
+  std::string cursor_ = "0-0";
+  std::uint64_t seq_ = 0;
+  std::uint64_t lost_ = 0;
+  std::deque<Sample<T>> cache_;
+};
+
+}  // namespace prime::optimus::detail
