@@ -2,6 +2,8 @@
 // conformance suite covers sync end to end, where worker timing varies).
 #include <gtest/gtest.h>
 
+#include <array>
+
 #include <chrono>
 #include <tuple>
 
@@ -16,7 +18,7 @@ using Pair = std::tuple<int, int>;
 class SyncRules : public ::testing::Test {
  protected:
   auto matcher(SyncPolicy policy) {
-    return std::make_unique<detail::Synchronizer<int, int>>(policy, out);
+    return std::make_unique<detail::Synchronizer<int, int>>(policy, std::array<std::size_t, 2>{policy.depth, policy.depth}, out);
   }
   template <std::size_t I>
   void offer(detail::Synchronizer<int, int>& s, int value, std::chrono::milliseconds at) {

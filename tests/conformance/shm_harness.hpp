@@ -33,7 +33,9 @@ struct Harness<shm::Core> {
 
   template <class T>
   static Feed<T> feed(shm::Core& core, std::string name, Qos qos = {}) {
-    const shm::TopicQos topic{.capacity = qos.capacity, .overflow = qos.overflow, .block_timeout = qos.block_timeout};
+    // Views pin slots: enough of them for the suite's syncs to wait for matches.
+    const shm::TopicQos topic{
+        .capacity = qos.capacity, .overflow = qos.overflow, .block_timeout = qos.block_timeout, .max_held = 16};
     auto publisher = core.publisher<T>(name, topic);
     auto source = core.subscribe<T>(name, {.spin = qos.spin}, topic);
     return {std::move(publisher), std::move(source)};

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 
 #include "prime/shm/qos.hpp"
@@ -33,6 +34,11 @@ inline bool check(const Checked& c) {
   }
   return sum == c.sum;
 }
+
+// A megabyte image: a topic of these with default QoS takes 130 MiB.
+struct Image {
+  std::byte pixels[1 << 20];
+};
 
 // Small ring, so the publisher laps slow readers all the time.
 inline constexpr shm::TopicQos kCheckedQos{.capacity = 4, .max_subscribers = 4, .max_held = 2};

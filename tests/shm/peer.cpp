@@ -5,17 +5,26 @@
 //   shm_peer publish  <domain> <topic> <first> <count> <capacity> <block|drop>
 //   shm_peer loan_and_hang <domain> <topic> <count> <capacity>   publish count, then loan, print, sleep
 //   shm_peer hold     <domain> <topic> <capacity> <block|drop>   subscribe, take one sample, print, sleep
+//   shm_peer sleep    <domain> <topic>                           subscribe (spin 0), print, wait asleep for a sample
+//   shm_peer stuck    <domain> <topic> <capacity>                subscribe to a block topic, print, never read
+//   shm_peer count    <domain> <topic> <capacity> <count>        block topic: read 0..count-1, check each, print "ok"
+//   shm_peer fill     <domain> <topic> <capacity>                block topic: publish until asleep for room
+//   shm_peer receive  <domain> <topic> <count>                   subscribe, print, read count samples, print
+//   shm_peer sync     <domain> <seconds>                         sync two topics (max_held 4) into a chain and a collector
+//   shm_peer memory   <domain>                                   a topic too big for /dev/shm, then one that fits
 //   shm_peer checksum_publish <domain> <topic> <count>           heavy overwrite of checksummed payloads
 //   shm_peer sequence_publish <domain> <topic> <count>           block: 0..count-1 as fast as possible
 //   shm_peer leave_segments <domain> <topic>                     create a topic, print, sleep (to be killed)
 #include <unistd.h>
 
+#include <atomic>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <thread>
 
+#include "prime/liberty.hpp"
 #include "prime/shm.hpp"
 #include "shm/messages.hpp"
 
@@ -24,8 +33,8 @@ using namespace std::chrono_literals;
 
 namespace {
 
-void say(const char* line) {
-  std::printf("%s\n", line);
+void say(const std::string& line) {
+  std::printf("%s\n", line.c_str());
   std::fflush(stdout);
 }
 
@@ -36,18 +45,22 @@ void say(const char* line) {
 
 Overflow overflow_of(const std::string& s) { return s == "block" ? Overflow::block : Overflow::drop_oldest; }
 
+[[noreturn]] void forever() {
+  while (true) std::this_thread::sleep_for(1h);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 4) fail("usage: shm_peer <role> <domain> <topic> ...");
+  if (argc < 3) fail("usage: shm_peer <role> <domain> ...");
   const std::string role = argv[1];
   shm::Core core{argv[2], {.participant = "peer-" + role}};
-  const std::string topic = argv[3];
+  const std::string topic = argc > 3 ? argv[3] : "";
   auto arg = [&](int i) { return std::strtoull(argv[i], nullptr, 10); };
 
   if (role == "publish" && argc == 8) {
-    auto publisher = core.publisher<std::uint64_t>(
-        topic, {.capacity = arg(6), .overflow = overflow_of(argv[7]), .block_timeout = 200ms});
+    auto publisher = core.publisher<std::uint64_t>(topic, {.capacity = arg(6), .overflow = overflow_of(argv[7]),
+                                                           .block_timeout = 200ms});
     for (std::uint64_t i = arg(4); i < arg(4) + arg(5); ++i) {
       if (auto sent = publisher.publish(i); !sent) fail(sent.error().describe());
     }
@@ -61,17 +74,103 @@ int main(int argc, char** argv) {
     if (!loan) fail(loan.error().describe());
     **loan = 0xdead;
     say("loaned");
-    std::this_thread::sleep_for(1h);
+    forever();
   }
   if (role == "hold" && argc == 6) {
-    auto reader = core.subscribe<std::uint64_t>(topic, {}, {.capacity = arg(4), .overflow = overflow_of(argv[5]),
-                                                            .block_timeout = 200ms})
+    auto reader = core.subscribe<std::uint64_t>(topic, {}, {.capacity = arg(4), .overflow = overflow_of(argv[5])})
                       .subscribe();
     say("subscribed");
     auto held = reader.read_for(10s);
     if (!held) fail(held.error().describe());
     say("holding");
-    std::this_thread::sleep_for(1h);
+    forever();
+  }
+  if (role == "sleep" && argc == 4) {
+    auto reader = core.subscribe<std::uint64_t>(topic, {.spin = 0us}).subscribe();
+    say("subscribed");
+    (void)reader.read_for(1h);
+    say("woken");
+    forever();
+  }
+  if (role == "stuck" && argc == 5) {
+    auto reader = core.subscribe<std::uint64_t>(topic, {}, {.capacity = arg(4), .overflow = Overflow::block}).subscribe();
+    say("subscribed");
+    forever();
+  }
+  if (role == "count" && argc == 6) {
+    auto reader = core.subscribe<std::uint64_t>(topic, {}, {.capacity = arg(4), .overflow = Overflow::block}).subscribe();
+    say("subscribed");
+    std::uint64_t wrong = 0;
+    std::vector<Sample<shm::View<std::uint64_t>>> batch;
+    for (std::uint64_t expected = 0; expected < arg(5);) {
+      batch.clear();
+      auto got = reader.read_some(batch, 64, Clock::now() + 30s);
+      if (!got) fail(got.error().describe() + " after " + std::to_string(expected));
+      for (const auto& s : batch) wrong += *s.value != expected++ ? 1 : 0;
+    }
+    say("ok wrong=" + std::to_string(wrong) + " lost=" + std::to_string(reader.lost()));
+    return 0;
+  }
+  if (role == "fill" && argc == 5) {
+    auto publisher = core.publisher<std::uint64_t>(topic, {.capacity = arg(4), .overflow = Overflow::block,
+                                                           .block_timeout = 1h});
+    say("publishing");
+    for (std::uint64_t i = 0;; ++i)
+      if (auto sent = publisher.publish(i); !sent) fail(sent.error().describe());
+  }
+  if (role == "receive" && argc == 5) {
+    auto reader = core.subscribe<std::uint64_t>(topic).subscribe();
+    say("subscribed");
+    for (std::uint64_t i = 0; i < arg(4); ++i) {
+      auto got = reader.read_for(30s);
+      if (!got) fail(got.error().describe());
+    }
+    say("received");
+    forever();
+  }
+  if (role == "sync" && argc == 4) {
+    const shm::TopicQos qos{.capacity = 16, .max_held = 4};
+    liberty::Core local;
+    auto sets = sync(exact_time, core.subscribe<std::uint64_t>("sync/lidar", {}, qos),
+                     core.subscribe<std::uint64_t>("sync/odom", {}, qos));
+    std::atomic<std::uint64_t> matched{0}, wrong{0};
+    auto checked = sets | local.chain([&](const std::tuple<shm::View<std::uint64_t>, shm::View<std::uint64_t>>& set) {
+                     wrong += *std::get<0>(set) == *std::get<1>(set) ? 0 : 1;
+                     return ++matched;
+                   });
+    auto newest = collector(local, sets);
+    say("subscribed");
+    const auto end = Clock::now() + std::chrono::seconds{arg(3)};
+    std::uint64_t polled = 0;
+    while (Clock::now() < end) {
+      try {
+        auto [lidar, odom] = newest(Token{});  // holds the set until the next call, like a control loop
+        polled += *lidar == *odom ? 1 : 0;
+      } catch (const Failure&) {  // nothing matched yet
+      }
+      std::this_thread::sleep_for(20ms);  // the control loop's period
+    }
+    say("matched=" + std::to_string(matched.load()) + " wrong=" + std::to_string(wrong.load()) +
+        " polled=" + std::to_string(polled));
+    return 0;
+  }
+  if (role == "memory" && argc == 3) {
+    using test::Image;
+    try {
+      auto huge = core.publisher<Image>("huge");
+      say("huge created");
+    } catch (const Failure& f) {
+      say("refused " + std::string{to_string(f.error().code)} + ": " + f.error().message);
+    }
+    auto fits = core.publisher<Image>("fits", {.capacity = 16, .max_subscribers = 1, .max_held = 2});
+    for (int i = 0; i < 700; ++i) {
+      auto loan = fits.loan();
+      if (!loan) fail(loan.error().describe());
+      for (std::size_t at = 0; at < sizeof(Image); at += 4096) (*loan)->pixels[at] = std::byte(i);
+      std::move(*loan).publish();
+    }
+    say("published 700");
+    return 0;
   }
   if (role == "checksum_publish" && argc == 5) {
     auto publisher = core.publisher<test::Checked>(topic, test::kCheckedQos);
@@ -100,7 +199,7 @@ int main(int argc, char** argv) {
     auto publisher = core.publisher<std::uint64_t>(topic);
     (void)publisher.publish(42);
     say("created");
-    std::this_thread::sleep_for(1h);
+    forever();
   }
   fail("unknown role or wrong arguments: " + role);
 }

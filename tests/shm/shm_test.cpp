@@ -1,5 +1,6 @@
-// Shm topics within one process: zero copy, cursors, history, QoS, checks,
-// registry and permissions. Cross-process behaviour is in process_test.cpp.
+// Shm topics within one process: zero copy, cursors, history, QoS, held-sample
+// budgets, checks, registry, names and permissions. Cross-process behaviour is
+// in process_test.cpp.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <time.h>
@@ -18,6 +19,7 @@
 #include "prime/liberty.hpp"
 #include "prime/shm.hpp"
 #include "shm/domain.hpp"
+#include "shm/mapped_topic.hpp"
 #include "support/failure.hpp"
 
 namespace prime::test {
@@ -74,8 +76,9 @@ TEST_F(ShmTest, APublishedSampleIsReadInPlaceWhereItWasWritten) {
 }
 
 TEST_F(ShmTest, AHeldSampleIsNeverOverwritten) {
-  auto publisher = core.publisher<std::uint64_t>("counter", {.capacity = 2, .max_held = 2});
-  auto reader = core.subscribe<std::uint64_t>("counter").subscribe();
+  const shm::TopicQos qos{.capacity = 2, .max_held = 2};
+  auto publisher = core.publisher<std::uint64_t>("counter", qos);
+  auto reader = core.subscribe<std::uint64_t>("counter", {}, qos).subscribe();
   ASSERT_TRUE(publisher.publish(7));
   auto held = reader.try_read();
   ASSERT_TRUE(held);
@@ -83,52 +86,91 @@ TEST_F(ShmTest, AHeldSampleIsNeverOverwritten) {
   EXPECT_EQ(*held->value, 7u) << "the publisher wrote 100 samples around the one still held";
 }
 
-TEST_F(ShmTest, SubscribersWhoHoldTooManySamplesAreAClearErrorNotCorruption) {
-  auto publisher = core.publisher<int>("greedy", {.capacity = 2, .max_subscribers = 1, .max_held = 1});
-  auto reader = core.subscribe<int>("greedy").subscribe();
+TEST_F(ShmTest, AReaderKeepsToItsMaxHeldSoThePublisherNeverRunsShort) {
+  const shm::TopicQos qos{.capacity = 2, .max_subscribers = 1, .max_held = 2};
+  auto publisher = core.publisher<int>("greedy", qos);
+  auto reader = core.subscribe<int>("greedy", {}, qos).subscribe();
+  auto errors = core.errors().subscribe();
   std::vector<shm::View<int>> hoard;
-  std::optional<Error> refused;
-  for (int i = 0; i < 10 && !refused; ++i) {
-    if (auto sent = publisher.publish(i); !sent) refused = sent.error();
+  for (int i = 0; i < 100; ++i) {
+    ASSERT_TRUE(publisher.publish(i)) << "publish " << i << ": the reader may not hold more than the topic has room for";
     while (auto s = reader.try_read()) hoard.push_back(s->value);
   }
-  ASSERT_TRUE(refused) << "chunks are finite: hoarding must end in an error";
-  EXPECT_EQ(refused->code, Errc::limit_exceeded);
-  EXPECT_NE(refused->message.find("greedy"), std::string::npos) << refused->message;
-  for (std::size_t i = 0; i < hoard.size(); ++i) EXPECT_EQ(*hoard[i], static_cast<int>(i));
-  hoard.clear();
-  EXPECT_TRUE(publisher.publish(99)) << "released views free their chunks";
+  ASSERT_EQ(hoard.size(), 2u) << "the reader stops taking at its max_held";
+  EXPECT_EQ(*hoard[0], 0);
+  EXPECT_EQ(*hoard[1], 1);
+  auto said = errors.try_read();
+  ASSERT_TRUE(said) << "reading past the budget is reported";
+  EXPECT_EQ(said->value.code, Errc::limit_exceeded);
+  EXPECT_NE(said->value.message.find("topic 'greedy': a reader holds its max_held of 2 samples"), std::string::npos)
+      << said->value.message;
+  EXPECT_FALSE(errors.try_read()) << "once, not on every read";
+
+  auto waited = reader.read_for(20ms);
+  ASSERT_FALSE(waited);
+  EXPECT_EQ(waited.error().code, Errc::limit_exceeded) << waited.error().describe();
+
+  hoard.erase(hoard.begin());  // release one
+  auto next = reader.try_read();
+  ASSERT_TRUE(next) << "a released view makes room for the next read";
+  EXPECT_EQ(*next->value, 98) << "the oldest still in the ring; what was overwritten meanwhile is counted lost";
+  EXPECT_EQ(reader.lost(), 96u);
 }
 
-TEST_F(ShmTest, EverySubscriberHasItsOwnCursor) {
-  auto publisher = core.publisher<int>("ticks");
-  auto topic = core.subscribe<int>("ticks");
-  auto fast = topic.subscribe();
-  auto slow = topic.subscribe();
+TEST_F(ShmTest, AWaitingReadAtItsBudgetGoesOnWhenAnotherThreadReleasesAView) {
+  const shm::TopicQos qos{.capacity = 4, .max_held = 1};
+  auto publisher = core.publisher<int>("handoff", qos);
+  auto reader = core.subscribe<int>("handoff", {}, qos).subscribe();
+  ASSERT_TRUE(publisher.publish(1));
+  ASSERT_TRUE(publisher.publish(2));
+  auto first = reader.try_read();
+  ASSERT_TRUE(first);
+  std::atomic<bool> released{false};
+  std::jthread worker{[&, view = std::move(first->value)]() mutable {
+    while (!released.load()) std::this_thread::yield();
+    { auto gone = std::move(view); }
+  }};
+  std::jthread release_soon{[&] { released = true; }};
+  auto second = reader.read_for(5s);
+  ASSERT_TRUE(second) << second.error().describe();
+  EXPECT_EQ(*second->value, 2);
+}
+
+TEST_F(ShmTest, LatestNeedsOneSampleOfTheBudgetAndSkipsToTheNewest) {
+  const shm::TopicQos qos{.capacity = 8, .max_held = 1};
+  auto publisher = core.publisher<int>("pose1", qos);
+  auto reader = core.subscribe<int>("pose1", {}, qos).subscribe();
+  EXPECT_FALSE(reader.latest());
   for (int i = 0; i < 5; ++i) ASSERT_TRUE(publisher.publish(i));
-  EXPECT_EQ(fast.read_all().size(), 5u);
+  auto latest = reader.latest();
+  ASSERT_TRUE(latest);
+  EXPECT_EQ(*latest->value, 4);
+  latest.reset();
+  EXPECT_EQ(*reader.latest()->value, 4) << "asked again with nothing new: the same";
   ASSERT_TRUE(publisher.publish(5));
-  EXPECT_EQ(fast.read_all().size(), 1u);
-  const auto all = slow.read_all();
-  ASSERT_EQ(all.size(), 6u);
-  for (int i = 0; i < 6; ++i) EXPECT_EQ(*all[i].value, i);
+  EXPECT_EQ(*reader.latest()->value, 5) << "the one held was let go first, so a budget of one is enough";
+  EXPECT_EQ(reader.lost(), 0u) << "skipped to the newest: read past, not lost";
 }
 
 TEST_F(ShmTest, ALateJoinerGetsTheHistoryItAsksFor) {
-  auto publisher = core.publisher<int>("map", {.capacity = 8});
+  const shm::TopicQos qos{.capacity = 8};
+  auto publisher = core.publisher<int>("map", qos);
   for (int i = 0; i < 20; ++i) ASSERT_TRUE(publisher.publish(i));
-  auto last3 = core.subscribe<int>("map", {.history = 3}).subscribe().read_all();
+  auto last3 = core.subscribe<int>("map", {.history = 3}, qos).subscribe().read_all();
   ASSERT_EQ(last3.size(), 3u);
   EXPECT_EQ(*last3[0].value, 17);
   EXPECT_EQ(*last3[2].value, 19);
-  auto capped = core.subscribe<int>("map", {.history = 100}).subscribe().read_all();
+  auto reader = core.subscribe<int>("map", {.history = 100}, qos).subscribe();
+  std::vector<int> capped;
+  while (auto s = reader.try_read()) capped.push_back(*s->value);
   EXPECT_EQ(capped.size(), 8u) << "history is at most the capacity";
-  EXPECT_TRUE(core.subscribe<int>("map").subscribe().read_all().empty()) << "no history by default";
+  EXPECT_TRUE(core.subscribe<int>("map", {}, qos).subscribe().read_all().empty()) << "no history by default";
 }
 
 TEST_F(ShmTest, DropOldestNeverWaitsAndTellsTheSlowSubscriberWhatItLost) {
-  auto publisher = core.publisher<int>("lidar", {.capacity = 4});
-  auto reader = core.subscribe<int>("lidar").subscribe();
+  const shm::TopicQos qos{.capacity = 4};
+  auto publisher = core.publisher<int>("lidar", qos);
+  auto reader = core.subscribe<int>("lidar", {}, qos).subscribe();
   for (int i = 0; i < 1000; ++i) ASSERT_TRUE(publisher.publish(i));
   const auto kept = reader.read_all();
   ASSERT_EQ(kept.size(), 4u);
@@ -139,25 +181,26 @@ TEST_F(ShmTest, DropOldestNeverWaitsAndTellsTheSlowSubscriberWhatItLost) {
 
 TEST_F(ShmTest, BlockWaitsForTheSlowestSubscriberAndLosesNothing) {
   constexpr int kCount = 20000;
-  auto publisher = core.publisher<int>("cmds", {.capacity = 8, .overflow = Overflow::block});
-  auto topic = core.subscribe<int>("cmds");
+  const shm::TopicQos qos{.capacity = 8, .overflow = Overflow::block};
+  auto publisher = core.publisher<int>("cmds", qos);
+  auto topic = core.subscribe<int>("cmds", {}, qos);
   auto a = topic.subscribe();
   auto b = topic.subscribe();
   std::jthread producer{[&] {
     for (int i = 0; i < kCount; ++i) ASSERT_TRUE(publisher.publish(i));
   }};
-  auto read_all_of = [](Reader<shm::View<int>>& reader, std::chrono::microseconds pause) {
+  auto read_all_of = [](Reader<shm::View<int>>& reader, bool yield) {
     int wrong = 0;
     for (int i = 0; i < kCount; ++i) {
       auto v = reader.read_for(5s);
       if (!v || *v->value != i) ++wrong;
-      if (i % 1000 == 0) std::this_thread::sleep_for(pause);
+      if (yield) std::this_thread::yield();  // b lags behind a: the publisher waits for the slowest
     }
     return wrong;
   };
   int wrong_b = 0;
-  std::jthread slow{[&] { wrong_b = read_all_of(b, 2ms); }};  // b lags behind a
-  EXPECT_EQ(read_all_of(a, 0us), 0);
+  std::jthread slow{[&] { wrong_b = read_all_of(b, true); }};
+  EXPECT_EQ(read_all_of(a, false), 0);
   slow.join();
   EXPECT_EQ(wrong_b, 0);
   EXPECT_EQ(a.lost() + b.lost(), 0u);
@@ -182,8 +225,9 @@ TEST_F(ShmTest, BoundedTypesCarryVariableContent) {
 
 TEST_F(ShmTest, RawByteTopicsCarryMessagesUpToTheirMaximum) {
   constexpr std::size_t kMax = 1 << 20;
-  auto publisher = core.publisher<shm::Bytes>("camera", {.capacity = 2, .max_message_size = kMax});
-  auto reader = core.subscribe<shm::Bytes>("camera", {}, {.capacity = 2, .max_message_size = kMax}).subscribe();
+  const shm::TopicQos qos{.capacity = 2, .max_message_size = kMax, .max_subscribers = 1, .max_held = 1};
+  auto publisher = core.publisher<shm::Bytes>("camera", qos);
+  auto reader = core.subscribe<shm::Bytes>("camera", {}, qos).subscribe();
   auto image = publisher.loan(640 * 480 * 3);
   ASSERT_TRUE(image);
   for (std::size_t i = 0; i < image->bytes().size(); ++i) image->bytes()[i] = std::byte(i % 251);
@@ -202,7 +246,25 @@ TEST_F(ShmTest, RawByteTopicsCarryMessagesUpToTheirMaximum) {
                                            std::to_string(kMax)),
             std::string::npos)
       << oversized.error().message;
+  received.reset();
   EXPECT_TRUE(reader.read_all().empty()) << "nothing was published by the refused loan";
+}
+
+TEST_F(ShmTest, ATopicTakesTheMemoryItsQosSaysAllReservedAtCreation) {
+  const shm::TopicQos qos{.capacity = 16, .max_message_size = 4096, .max_subscribers = 2, .max_held = 3};
+  const auto expected = shm::topic_memory<shm::Bytes>(qos);
+  const std::size_t chunks = (16 + 2 * 3 + 2) * (64 + 4096);  // 24 chunks of header and payload
+  EXPECT_GE(expected, chunks);
+  EXPECT_LT(expected - chunks, 8192u) << "the rest is the topic's header and its ring";
+  auto publisher = core.publisher<shm::Bytes>("sized", qos);
+  struct stat st {};
+  ASSERT_EQ(::stat(("/dev/shm/" + shm::detail::segment_name(core.domain(), "topic", "sized")).c_str(), &st), 0);
+  EXPECT_EQ(static_cast<std::size_t>(st.st_size), expected);
+  EXPECT_GE(static_cast<std::size_t>(st.st_blocks) * 512, expected) << "every byte is allocated, not only sized";
+  const auto by_default = shm::topic_memory<std::uint64_t>({});
+  EXPECT_GE(by_default, (64u + 8 * 8 + 2) * 128);
+  EXPECT_LT(by_default, (64u + 8 * 8 + 2) * 128 + 8192)
+      << "default QoS: about twice the ring's capacity in chunks, not nine times";
 }
 
 TEST_F(ShmTest, OpeningATopicWithAnotherTypeNamesTheTopicAndBothTypes) {
@@ -214,18 +276,92 @@ TEST_F(ShmTest, OpeningATopicWithAnotherTypeNamesTheTopicAndBothTypes) {
   EXPECT_TRUE(fails_with([&] { (void)other.publisher<double>("pose"); }, Errc::type_mismatch, "not double"));
 }
 
-TEST_F(ShmTest, APublisherAskingForOtherQosIsRefusedWithBoth) {
-  auto sub = core.subscribe<int>("odom", {}, {.capacity = 16});
-  EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>("odom", {.capacity = 32}); }, Errc::limit_exceeded,
+TEST_F(ShmTest, OtherQosIsRefusedWhicheverSideOpensTheTopicFirst) {
+  const shm::TopicQos sixteen{.capacity = 16}, thirty_two{.capacity = 32};
+  {
+    auto subscriber_first = core.subscribe<int>("odom", {}, sixteen);
+    EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>("odom", thirty_two); }, Errc::qos_mismatch,
+                           "topic 'odom' exists with capacity 16"));
+    EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>("odom", thirty_two); }, Errc::qos_mismatch,
+                           "this publisher asks for capacity 32"));
+  }
+  shm::Core other{unique_domain("order")};
+  auto publisher_first = other.publisher<int>("odom", sixteen);
+  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("odom", {}, thirty_two); }, Errc::qos_mismatch,
                          "topic 'odom' exists with capacity 16"));
-  EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>("odom", {.capacity = 32}); }, Errc::limit_exceeded,
-                         "this publisher asks for capacity 32"));
+  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("odom", {}, thirty_two); }, Errc::qos_mismatch,
+                         "this subscriber asks for capacity 32"));
+  EXPECT_NO_THROW((void)other.subscribe<int>("odom", {}, {.capacity = 16, .block_timeout = 5ms}))
+      << "the block timeout is the publisher's own, not the topic's";
 }
 
 TEST_F(ShmTest, ATopicHasOneLivePublisher) {
   auto first = core.publisher<int>("cmd_vel");
-  EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>("cmd_vel"); }, Errc::limit_exceeded,
-                         "topic 'cmd_vel' already has a publisher: pid " + std::to_string(::getpid())));
+  EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>("cmd_vel"); }, Errc::in_use,
+                         "topic 'cmd_vel' already has a publisher: participant 'shm_test' (pid " +
+                             std::to_string(::getpid()) + ")"));
+  shm::Core other{core.domain()};
+  EXPECT_TRUE(fails_with([&] { (void)other.publisher<int>("cmd_vel"); }, Errc::in_use, "already has a publisher"))
+      << "another participant of the same process is a live one too";
+}
+
+TEST_F(ShmTest, ALoanMayOutliveItsPublisher) {
+  auto reader = core.subscribe<int>("late").subscribe();
+  std::optional<shm::Loan<int>> loan;
+  {
+    auto publisher = core.publisher<int>("late");
+    auto slot = publisher.loan();
+    ASSERT_TRUE(slot);
+    loan.emplace(std::move(*slot));
+    **loan = 42;
+  }
+  EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>("late"); }, Errc::in_use, "already has a publisher"))
+      << "the publisher's role lasts while its loan does";
+  std::move(*loan).publish();
+  loan.reset();
+  auto got = reader.try_read();
+  ASSERT_TRUE(got);
+  EXPECT_EQ(*got->value, 42);
+  EXPECT_NO_THROW((void)core.publisher<int>("late")) << "the last loan ended the old publisher";
+}
+
+TEST_F(ShmTest, AViewCarriesTheStampThePublisherGaveIt) {
+  auto publisher = core.publisher<int>("stamped");
+  auto reader = core.subscribe<int>("stamped").subscribe();
+  const auto taken = Clock::now() - 30ms;
+  ASSERT_TRUE(publisher.publish(1, taken));
+  auto got = reader.try_read();
+  ASSERT_TRUE(got);
+  EXPECT_EQ(got->value.stamp(), taken);
+  EXPECT_EQ(got->stamp, taken);
+}
+
+TEST_F(ShmTest, SequencesGoOnAcrossTheRingsTwoToTheFortiethWrap) {
+  using shm::detail::RingEntry;
+  constexpr std::uint64_t kWrap = 1ull << 40;
+  static_assert(RingEntry::ahead(RingEntry::pack(kWrap + 2, 7), kWrap - 3) == 5);
+  static_assert(RingEntry::ahead(RingEntry::pack(kWrap - 3, 7), kWrap + 2) == -5);
+  static_assert(RingEntry::chunk(RingEntry::pack(kWrap + 2, 7)) == 7);
+
+  // A topic whose first sequence lies just short of the wrap: publish, read
+  // and overwrite across it.
+  const shm::TopicQos qos{.capacity = 4, .max_message_size = sizeof(std::uint64_t), .max_subscribers = 8, .max_held = 8};
+  auto registry = shm::detail::Registry::join(unique_domain("wrap"), 0600, "test");
+  auto topic = shm::detail::Topic::open(registry, "wrapping", Fingerprint::of<std::uint64_t>(), qos, kWrap - 6);
+  shm::Publisher<std::uint64_t> publisher{topic, 1s, {}};
+  shm::SubscriptionReader<std::uint64_t> reader{topic, {}, {}};
+  for (std::uint64_t i = 0; i < 12; ++i) {
+    ASSERT_TRUE(publisher.publish(i));
+    auto got = reader.try_read();
+    ASSERT_TRUE(got) << "sample " << i;
+    EXPECT_EQ(*got->value, i);
+    EXPECT_EQ(got->value.sequence(), kWrap - 6 + i);
+  }
+  for (std::uint64_t i = 12; i < 20; ++i) ASSERT_TRUE(publisher.publish(i));
+  std::vector<std::uint64_t> kept;
+  while (auto got = reader.try_read()) kept.push_back(*got->value);
+  EXPECT_EQ(kept, (std::vector<std::uint64_t>{16, 17, 18, 19})) << "a lapped reader past the wrap keeps the newest";
+  EXPECT_EQ(reader.lost(), 4u);
 }
 
 TEST_F(ShmTest, SubscribersBeyondTheMaximumAreRefused) {
@@ -255,13 +391,24 @@ TEST_F(ShmTest, AnIdleSubscriberSleepsAndBurnsNoCpu) {
 TEST_F(ShmTest, ASleepingSubscriberWakesForANewSample) {
   auto publisher = core.publisher<int>("wake");
   auto reader = core.subscribe<int>("wake", {.spin = 0us}).subscribe();
+  const MappedTopic mapped{core.domain(), "wake"};
   std::jthread later{[&] {
-    std::this_thread::sleep_for(50ms);
-    (void)publisher.publish(5);
+    if (mapped.a_subscriber_sleeps()) (void)publisher.publish(5);
   }};
-  auto value = reader.read_for(5s);
+  auto value = reader.read_for(20s);
   ASSERT_TRUE(value) << value.error().describe();
   EXPECT_EQ(*value->value, 5);
+}
+
+TEST_F(ShmTest, PublishingWithNoSleeperMakesNoSystemCall) {
+  auto publisher = core.publisher<int>("quiet");
+  auto reader = core.subscribe<int>("quiet").subscribe();
+  const auto before = shm::detail::futex_syscalls.load();
+  for (int i = 0; i < 1000; ++i) {
+    ASSERT_TRUE(publisher.publish(i));
+    ASSERT_TRUE(reader.try_read());
+  }
+  EXPECT_EQ(shm::detail::futex_syscalls.load(), before);
 }
 
 TEST_F(ShmTest, ASubscriptionIsASourceOfTheTopology) {
@@ -279,12 +426,40 @@ TEST_F(ShmTest, ASubscriptionIsASourceOfTheTopology) {
       << speed.graph().text();
 }
 
+TEST_F(ShmTest, ASyncOfTopicsHoldsNoMoreThanTheirMaxHeld) {
+  const shm::TopicQos qos{.capacity = 64, .max_held = 4};  // less than the sync's depth of 32
+  auto lidar = core.publisher<int>("sync/lidar", qos);
+  auto odom = core.publisher<int>("sync/odom", qos);
+  auto sets = sync(exact_time, core.subscribe<int>("sync/lidar", {}, qos), core.subscribe<int>("sync/odom", {}, qos));
+  auto newest = collector(core, sets);
+  auto reader = sets.subscribe();
+  const auto t0 = Clock::now();
+  for (int i = 0; i < 500; ++i) {
+    const auto stamp = t0 + std::chrono::milliseconds{i};
+    ASSERT_TRUE(lidar.publish(i, stamp)) << i;
+    ASSERT_TRUE(odom.publish(1000 + i, stamp)) << i;
+    auto set = reader.read_for(5s);
+    ASSERT_TRUE(set) << set.error().describe();
+    EXPECT_EQ(*std::get<0>(set->value), i);
+    EXPECT_EQ(*std::get<1>(set->value), 1000 + i);
+    if (i % 10 == 0) {
+      auto [l, o] = newest(Token{});
+      EXPECT_EQ(*o, *l + 1000);
+    }
+  }
+  EXPECT_TRUE(fails_with([&] { (void)sync(exact_time, core.subscribe<int>("sync/lidar", {}, qos),
+                                          core.subscribe<int>("thin", {}, {.max_held = 2})); },
+                         Errc::limit_exceeded, "source 'thin' lets a reader hold 2 values (max_held); a sync needs at least 4"));
+}
+
 TEST_F(ShmTest, TheRegistryListsParticipantsAndTopicsWithPidsAndQos) {
-  auto publisher = core.publisher<int>("status", {.capacity = 32, .overflow = Overflow::block});
-  auto reader = core.subscribe<int>("status").subscribe();
+  const shm::TopicQos qos{.capacity = 32, .overflow = Overflow::block};
+  auto publisher = core.publisher<int>("status", qos);
+  auto reader = core.subscribe<int>("status", {}, qos).subscribe();
   const auto registry = core.registry();
   ASSERT_EQ(registry.participants.size(), 1u);
   EXPECT_EQ(registry.participants[0].pid, static_cast<std::uint32_t>(::getpid()));
+  EXPECT_TRUE(registry.participants[0].alive);
   ASSERT_EQ(registry.topics.size(), 1u);
   const auto& topic = registry.topics[0];
   EXPECT_EQ(topic.name, "status");
@@ -292,6 +467,7 @@ TEST_F(ShmTest, TheRegistryListsParticipantsAndTopicsWithPidsAndQos) {
   EXPECT_EQ(topic.qos.capacity, 32u);
   EXPECT_EQ(topic.qos.overflow, Overflow::block);
   EXPECT_EQ(topic.publisher_pid, static_cast<std::uint32_t>(::getpid()));
+  EXPECT_EQ(topic.publisher, "shm_test");
   EXPECT_EQ(topic.subscriber_pids, std::vector<std::uint32_t>{static_cast<std::uint32_t>(::getpid())});
 }
 
@@ -334,6 +510,38 @@ TEST(ShmDomain, TheLastParticipantToLeaveRemovesTheSegments) {
     EXPECT_EQ(count(), 3) << "registry and two topics stay while a participant remains";
   }
   EXPECT_EQ(count(), 0);
+}
+
+TEST(ShmDomain, NamesAreEscapedSoDomainsAndTopicsNeverCollide) {
+  using shm::detail::segment_name;
+  EXPECT_NE(segment_name("a.topic", "topic", "x"), segment_name("a", "topic", "topic.x"));
+  EXPECT_EQ(segment_name("robot", "topic", "lidar/scan.v2"), "prime.robot.topic.lidar%2Fscan%2Ev2");
+  const auto a = unique_domain("dots") + ".topic";
+  const auto b = a.substr(0, a.size() - std::string{".topic"}.size());
+  shm::Core one{a};
+  shm::Core two{b};
+  auto x = one.publisher<int>("x");
+  EXPECT_NO_THROW((void)two.publisher<double>("topic.x")) << "another domain's topic, not the same segment";
+}
+
+TEST(ShmDomain, AParticipantStaysWhileAnythingItMadeLives) {
+  const auto domain = unique_domain("outlive");
+  shm::Core watcher{domain};
+  std::optional<Reader<shm::View<int>>> reader;
+  {
+    shm::Core core{domain, {.participant = "short-lived"}};
+    reader.emplace(core.subscribe<int>("t").subscribe());
+  }
+  auto names = [&] {
+    std::vector<std::string> alive;
+    for (const auto& p : watcher.registry().participants)
+      if (p.alive) alive.push_back(p.name);
+    return alive;
+  };
+  EXPECT_EQ(names().size(), 2u) << "its reader still reads, so its slots must not be reclaimed";
+  EXPECT_EQ(watcher.reclaim(), 0u);
+  reader.reset();
+  EXPECT_EQ(names().size(), 1u);
 }
 
 }  // namespace

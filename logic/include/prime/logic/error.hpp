@@ -18,6 +18,10 @@ enum class Errc {
   type_mismatch,   // an endpoint was opened with another type than it carries
   peer_dead,       // the process on the other side is gone
   unreachable,     // a server could not be reached
+  in_use,          // a name that admits one owner (a topic's publisher) has a live one
+  qos_mismatch,    // an endpoint exists with other QoS than this side asks for
+  no_space,        // memory for an endpoint could not be reserved (a full /dev/shm)
+  not_found,       // no endpoint of that name exists (a service nobody serves)
 };
 
 constexpr std::string_view to_string(Errc code) noexcept {
@@ -31,6 +35,10 @@ constexpr std::string_view to_string(Errc code) noexcept {
     case Errc::type_mismatch: return "type mismatch";
     case Errc::peer_dead: return "peer dead";
     case Errc::unreachable: return "unreachable";
+    case Errc::in_use: return "in use";
+    case Errc::qos_mismatch: return "QoS mismatch";
+    case Errc::no_space: return "no space";
+    case Errc::not_found: return "not found";
   }
   return "unknown";
 }

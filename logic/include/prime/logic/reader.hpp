@@ -45,6 +45,13 @@ class Reader {
       }
       return n;
     }
+
+    // Moves `latest` on to the newest unread value, if there is one. Media
+    // whose values pin memory override it to let go of the old value first
+    // and to skip straight to the newest.
+    virtual void read_latest(std::optional<Sample<T>>& latest) {
+      while (auto s = try_read()) latest = std::move(s);
+    }
   };
 
   explicit Reader(std::unique_ptr<Impl> impl) : impl_{std::move(impl)} {}
@@ -84,7 +91,7 @@ class Reader {
   [[nodiscard]] std::optional<Sample<T>> latest()
     requires std::copy_constructible<T>
   {
-    while (auto s = impl_->try_read()) last_ = std::move(s);
+    impl_->read_latest(last_);
     return last_;
   }
 

@@ -81,8 +81,10 @@ template <Source S, Chain C>
                   "not convert to the chain's input_type");
   } else {
     using Out = typename C::output_type;
-    LocalSource<Out> out{source.name() + " | " + detail::exit_names(chain.graph()), source.qos(),
-                         source.runtime(), Graph::sequence(source.graph(), chain.graph())};
+    auto qos = source.qos();
+    if constexpr (!std::same_as<Out, In>) qos.max_held = 0;  // new values: they pin nothing of the source's
+    LocalSource<Out> out{source.name() + " | " + detail::exit_names(chain.graph()), qos, source.runtime(),
+                         Graph::sequence(source.graph(), chain.graph())};
     detail::spawn_reader(source.runtime(), source.subscribe(), "worker '" + out.name() + "'",
                          [chain = std::move(chain), out](Sample<In>&& s, std::stop_token stop) {
                            out.publish(chain(std::move(s.value)), s.stamp, std::move(stop));

@@ -29,7 +29,7 @@ class Hub {
  public:
   Hub(std::string name, Qos qos, std::weak_ptr<RuntimeState> runtime)
       : name_{std::move(name)}, qos_{qos}, runtime_{std::move(runtime)} {
-    if (qos_.capacity == 0) throw Failure{{Errc::limit_exceeded, "source '" + name_ + "': capacity must be at least 1"}};
+    validate(qos_, name_);
   }
 
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
@@ -46,7 +46,7 @@ class Hub {
   }
 
   [[nodiscard]] std::shared_ptr<Queue<T>> attach(const Qos& qos) {
-    if (qos.capacity == 0) throw Failure{{Errc::limit_exceeded, "source '" + name_ + "': capacity must be at least 1"}};
+    validate(qos, name_);
     auto queue = std::make_shared<Queue<T>>(qos);
     std::scoped_lock lock{mutex_};
     if (!std::copy_constructible<T> && !readers_->empty())

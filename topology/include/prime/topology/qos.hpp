@@ -2,6 +2,9 @@
 
 #include <chrono>
 #include <cstddef>
+#include <string>
+
+#include "prime/logic/error.hpp"
 
 namespace prime {
 
@@ -24,6 +27,17 @@ struct Qos {
   // sleeps. A value due within microseconds then costs no wake-up call; an
   // idle reader still sleeps and burns nothing. Zero: sleep at once.
   std::chrono::microseconds spin{20};
+  // How many of the source's values one reader may keep at once; 0: no
+  // limit. Sources whose values pin scarce memory (a shared-memory topic's
+  // views pin its slots) say so here, and what buffers their values (sync)
+  // sizes its buffers to stay within it.
+  std::size_t max_held = 0;
 };
+
+// Throws when `qos` cannot make a buffer, naming the source `name`: every
+// medium's sources check their QoS here.
+inline void validate(const Qos& qos, const std::string& name) {
+  if (qos.capacity == 0) throw Failure{{Errc::limit_exceeded, "source '" + name + "': capacity must be at least 1"}};
+}
 
 }  // namespace prime

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstddef>
 #include <deque>
+#include <initializer_list>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -52,7 +53,9 @@ class Synchronizer {
   using Tuple = std::tuple<Ts...>;
   static constexpr std::size_t kInputs = sizeof...(Ts);
 
-  Synchronizer(SyncPolicy policy, LocalSource<Tuple> out) : policy_{policy}, out_{std::move(out)} {}
+  // `depths`: how many values of each input may wait for a match.
+  Synchronizer(SyncPolicy policy, std::array<std::size_t, kInputs> depths, LocalSource<Tuple> out)
+      : policy_{policy}, depths_{depths}, out_{std::move(out)} {}
 
   template <std::size_t I>
   void offer(Sample<std::tuple_element_t<I, Tuple>>&& sample, std::stop_token stop) {
@@ -63,7 +66,7 @@ class Synchronizer {
       return;
     }
     auto& queue = std::get<I>(queues_);
-    if (queue.size() == policy_.depth) queue.pop_front();
+    if (queue.size() >= depths_[I]) queue.pop_front();
     queue.push_back(std::move(sample));
     publish_matches(stop, std::make_index_sequence<kInputs>{});
   }
@@ -116,10 +119,44 @@ class Synchronizer {
   }
 
   const SyncPolicy policy_;
+  const std::array<std::size_t, kInputs> depths_;
   LocalSource<Tuple> out_;
   std::mutex mutex_;
   std::tuple<std::optional<Sample<Ts>>...> latest_;
   std::tuple<std::deque<Sample<Ts>>...> queues_;
+};
+
+// A sync of sources whose values pin memory (a shared-memory topic's views
+// pin its slots: Qos::max_held) holds no more of each than its reader may:
+// besides the values waiting for a match, one being read, the sets queued
+// for the sync's reader and the set that reader holds. The queue for the
+// reader takes a quarter of the smallest budget (at least one set: a slow
+// reader then sees the newest sets), the matching the rest.
+struct SyncBudget {
+  std::size_t queued_sets;  // 0: no input pins memory
+  std::size_t smallest;     // the smallest max_held among the inputs
+
+  static SyncBudget of(std::initializer_list<std::size_t> max_held) {
+    SyncBudget b{0, 0};
+    for (const auto held : max_held)
+      if (held != 0) b.smallest = b.smallest == 0 ? held : std::min(b.smallest, held);
+    if (b.smallest != 0) b.queued_sets = std::max<std::size_t>(1, (b.smallest - 2) / 4);
+    return b;
+  }
+
+  // How many values of an input may wait for a match.
+  [[nodiscard]] std::size_t depth(const SyncPolicy& policy, const Qos& qos, const std::string& sync,
+                                  const std::string& source) const {
+    if (qos.max_held == 0) return policy.depth;
+    const auto others = 2 + queued_sets;  // one being read, one the reader holds, those queued for it
+    if (qos.max_held <= others)
+      throw Failure{{Errc::limit_exceeded,
+                     sync + ": source '" + source + "' lets a reader hold " + std::to_string(qos.max_held) +
+                         " values (max_held); a sync needs at least " + std::to_string(others + 1) +
+                         ": one waiting for a match, one being read, " + std::to_string(queued_sets) +
+                         " in the sets queued for its reader, one in the set that reader holds"}};
+    return std::min(policy.depth, qos.max_held - others);
+  }
 };
 
 template <class... S, std::size_t... I>
@@ -131,9 +168,14 @@ auto start_sync(SyncPolicy policy, std::index_sequence<I...>, const S&... source
   std::string name = "sync(";
   ((name += (I == 0 ? "" : ", ") + sources.name()), ...);
   name += ")";
+  const auto budget = SyncBudget::of({sources.qos().max_held...});
+  const std::array<std::size_t, sizeof...(S)> depths{budget.depth(policy, sources.qos(), name, sources.name())...};
+  Qos out_qos = first.qos();
+  out_qos.max_held = budget.smallest;
+  if (budget.queued_sets != 0) out_qos.capacity = std::min(out_qos.capacity, budget.queued_sets);
   Graph graph = Graph::sequence(Graph::parallel({&sources.graph()...}), Graph::node(name, "sync", runtime->medium()));
-  LocalSource<Tuple> out{name, first.qos(), first.runtime(), std::move(graph)};
-  auto matcher = std::make_shared<Synchronizer<typename S::value_type...>>(policy, out);
+  LocalSource<Tuple> out{name, out_qos, first.runtime(), std::move(graph)};
+  auto matcher = std::make_shared<Synchronizer<typename S::value_type...>>(policy, depths, out);
   (spawn_reader(sources.runtime(), sources.subscribe(), name + " input '" + sources.name() + "'",
                 [matcher](auto&& sample, std::stop_token stop) {
                   matcher->template offer<I>(std::move(sample), std::move(stop));

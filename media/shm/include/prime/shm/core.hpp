@@ -1,15 +1,20 @@
 #pragma once
 
+#include <cstddef>
 #include <fstream>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <type_traits>
 #include <utility>
 
 #include "prime/common/fingerprint.hpp"
 #include "prime/logic/error.hpp"
+#include "prime/shm/detail/layout.hpp"
+#include "prime/shm/detail/registry.hpp"
 #include "prime/shm/detail/topic.hpp"
+#include "prime/shm/message.hpp"
 #include "prime/shm/publisher.hpp"
 #include "prime/shm/qos.hpp"
 #include "prime/shm/registry.hpp"
@@ -19,89 +24,142 @@
 
 namespace prime::shm {
 
+namespace detail {
+
+// `qos` with its defaults filled in for messages of type `type`, or a
+// Failure naming the topic and what is wrong.
+inline TopicQos complete(const std::string& name, const Fingerprint& type, bool raw, TopicQos qos) {
+  auto refuse = [&](const std::string& why) { throw Failure{{Errc::limit_exceeded, "topic '" + name + "': " + why}}; };
+  if (raw && qos.max_message_size == 0) refuse("a raw byte topic needs max_message_size");
+  if (qos.max_message_size == 0) qos.max_message_size = type.size;
+  if (qos.capacity == 0) refuse("capacity must be at least 1");
+  if (qos.max_held == 0) refuse("max_held must be at least 1");
+  if (qos.max_subscribers == 0 || qos.max_subscribers > kMaxSubscribers)
+    refuse("max_subscribers must be in [1, " + std::to_string(kMaxSubscribers) + "], not " +
+           std::to_string(qos.max_subscribers));
+  if (qos.max_message_size < type.size)
+    refuse("max_message_size " + std::to_string(qos.max_message_size) + " is smaller than " + type.describe());
+  const TopicGeometry geometry{qos.capacity, qos.max_message_size, qos.max_subscribers, qos.max_held};
+  if (geometry.chunk_count() >= kNoChunk) refuse("capacity and subscribers need more than 2^24 slots");
+  return qos;
+}
+
+inline bool same_layout(const TopicQos& a, const TopicQos& b) {
+  return a.capacity == b.capacity && a.max_message_size == b.max_message_size && a.overflow == b.overflow &&
+         a.max_subscribers == b.max_subscribers && a.max_held == b.max_held;
+}
+
+inline std::string describe(const TopicQos& q) {
+  return "capacity " + std::to_string(q.capacity) + ", max_message_size " + std::to_string(q.max_message_size) +
+         ", overflow " + (q.overflow == Overflow::block ? "block" : "drop_oldest") + ", max_subscribers " +
+         std::to_string(q.max_subscribers) + ", max_held " + std::to_string(q.max_held);
+}
+
+}  // namespace detail
+
+// The bytes of /dev/shm a topic of T with `qos` takes (all reserved when it
+// is created).
+template <Message T>
+[[nodiscard]] std::size_t topic_memory(const TopicQos& qos) {
+  const auto q = detail::complete("", Fingerprint::of<T>(), std::is_same_v<T, Bytes>, qos);
+  return detail::TopicGeometry{q.capacity, q.max_message_size, q.max_subscribers, q.max_held}.bytes();
+}
+
 // One participant of a shared-memory domain: it publishes and subscribes to
 // the domain's topics, which other processes of the same domain see, and it
 // runs local chains (erased, like Liberty's) after its subscriptions.
-// Joining a domain whose earlier participants are all dead removes what they
-// left; the last participant to leave removes the domain's segments.
+//
+// A participant is alive while it holds its lease in the domain's registry,
+// a file lock the kernel drops when the process dies, so liveness holds
+// across pid namespaces (containers sharing /dev/shm). Joining a domain
+// whose earlier participants are all dead removes what they left; the
+// participant leaves when the Core and every publisher, subscription and
+// view it made are gone, and the last participant to leave removes the
+// domain's segments.
 //
 // Thread-safe.
 class Core : public ErasedChainRuntime {
  public:
   explicit Core(std::string domain, DomainOptions options = {})
-      : ErasedChainRuntime{"shm"}, domain_{std::move(domain)}, options_{std::move(options)}, registry_{domain_, options_.permissions} {
-    if (domain_.empty()) throw Failure{{Errc::limit_exceeded, "shm: a domain needs a name"}};
-    registry_.join(options_.participant.empty() ? program_name() : options_.participant);
+      : ErasedChainRuntime{"shm"},
+        registry_{detail::Registry::join(domain, options.permissions,
+                                         options.participant.empty() ? program_name() : options.participant)} {
+    reclaim();
   }
-  ~Core() {
-    stop();
-    registry_.leave();
-  }
+  ~Core() { stop(); }
 
   // The publisher of topic `name`, creating the topic with `qos` if needed.
-  // Throws Failure when the topic carries another type, was made with
-  // another QoS, or has a live publisher already.
+  // Throws Failure when the topic carries another type
+  // (Errc::type_mismatch), has other QoS (Errc::qos_mismatch), has a live
+  // publisher already (Errc::in_use), or does not fit in /dev/shm
+  // (Errc::no_space).
   template <Message T>
   [[nodiscard]] Publisher<T> publisher(const std::string& name, TopicQos qos = {}) {
-    auto topic = open<T>(name, qos);
-    const auto have = topic->qos();
-    auto want = qos;
-    if (want.max_message_size == 0) want.max_message_size = Fingerprint::of<T>().size;
-    if (want.max_held == 0) want.max_held = want.capacity;
-    if (have.capacity != want.capacity || have.max_message_size != want.max_message_size ||
-        have.overflow != want.overflow || have.max_subscribers != want.max_subscribers || have.max_held != want.max_held)
-      throw Failure{{Errc::limit_exceeded, "topic '" + name + "' exists with " + describe(have) +
-                                               "; this publisher asks for " + describe(want)}};
+    auto topic = open<T>(name, qos, "publisher");
     return Publisher<T>{std::move(topic), qos.block_timeout, [runtime = runtime()](Error e) {
                           if (auto r = runtime.lock()) r->report(std::move(e));
                         }};
   }
 
   // A source of topic `name`'s samples, read in place. The topic is created
-  // with `topic_qos` if no one has opened it yet. Throws Failure when it
-  // carries another type.
+  // with `topic_qos` if no one has opened it yet. Throws as publisher() does.
   template <Message T>
   [[nodiscard]] Subscription<T> subscribe(const std::string& name, SubscribeQos qos = {}, TopicQos topic_qos = {}) {
-    auto topic = open<T>(name, topic_qos);
+    auto topic = open<T>(name, topic_qos, "subscriber");
     if (qos.history > topic->header().capacity) qos.history = topic->header().capacity;
     return Subscription<T>{std::move(topic), qos, runtime(), Graph::node(name, "source", "shm")};
   }
 
   // The domain's participants and topics as they are now.
-  [[nodiscard]] RegistrySnapshot registry() { return registry_.snapshot(); }
+  [[nodiscard]] RegistrySnapshot registry() {
+    RegistrySnapshot s;
+    s.participants = registry_->participants();
+    for (const auto& name : registry_->topics()) {
+      auto topic = detail::Topic::inspect(registry_, name);
+      if (!topic) continue;
+      auto& h = topic->header();
+      RegistrySnapshot::Topic t{name, h.type.describe(), topic->qos(), 0, {}, {}, h.head.load()};
+      if (const auto publisher = h.publisher.load(); registry_->alive(publisher)) {
+        t.publisher_pid = registry_->pid_of(publisher);
+        t.publisher = registry_->name_of(publisher);
+      }
+      for (std::size_t i = 0; i < h.max_subscribers; ++i)
+        if (const auto owner = h.subscribers[i].owner.load(); registry_->alive(owner))
+          t.subscriber_pids.push_back(registry_->pid_of(owner));
+      s.topics.push_back(std::move(t));
+    }
+    return s;
+  }
 
-  // Reclaims what dead participants left behind (their subscriber slots and
-  // the samples they held). Publishers also do this when they run short, and
-  // each participant does it on joining. Returns the subscriber slots freed.
-  std::size_t reclaim() { return registry_.reclaim(); }
+  // Reclaims what dead participants left behind: their registry entries,
+  // their subscriber slots and the samples those held. Publishers also do
+  // this when they wait, and each participant does it on joining. Returns
+  // the subscriber slots freed.
+  std::size_t reclaim() {
+    registry_->forget_dead_participants();
+    std::size_t freed = 0;
+    for (const auto& name : registry_->topics())
+      if (auto topic = detail::Topic::inspect(registry_, name)) freed += topic->reclaim_dead_subscribers();
+    return freed;
+  }
 
-  [[nodiscard]] const std::string& domain() const noexcept { return domain_; }
+  [[nodiscard]] const std::string& domain() const noexcept { return registry_->domain(); }
 
  private:
   template <Message T>
-  std::shared_ptr<detail::Topic> open(const std::string& name, const TopicQos& qos) {
-    if constexpr (std::is_same_v<T, Bytes>) {
-      if (qos.max_message_size == 0)
-        throw Failure{{Errc::limit_exceeded, "topic '" + name + "': a raw byte topic needs max_message_size"}};
-    }
+  std::shared_ptr<detail::Topic> open(const std::string& name, const TopicQos& asked, const char* side) {
     const auto type = Fingerprint::of<T>();
+    const auto qos = detail::complete(name, type, std::is_same_v<T, Bytes>, asked);
     std::scoped_lock lock{mutex_};
-    if (auto known = topics_[name].lock()) {
-      if (!(known->header().type == type))
-        throw Failure{{Errc::type_mismatch, "topic '" + name + "' carries " + known->header().type.describe() +
-                                                ", not " + type.describe()}};
-      return known;
-    }
-    registry_.add_topic(name);
-    auto topic = detail::Topic::open(domain_, name, type, qos, options_.permissions);
-    topics_[name] = topic;
+    auto topic = topics_[name].lock();
+    if (topic && !(topic->header().type == type))
+      throw Failure{{Errc::type_mismatch, "topic '" + name + "' carries " + topic->header().type.describe() +
+                                              ", not " + type.describe()}};
+    if (!topic) topics_[name] = topic = detail::Topic::open(registry_, name, type, qos);
+    if (const auto have = topic->qos(); !detail::same_layout(have, qos))
+      throw Failure{{Errc::qos_mismatch, "topic '" + name + "' exists with " + detail::describe(have) + "; this " +
+                                             side + " asks for " + detail::describe(qos)}};
     return topic;
-  }
-
-  static std::string describe(const TopicQos& q) {
-    return "capacity " + std::to_string(q.capacity) + ", max_message_size " + std::to_string(q.max_message_size) +
-           ", overflow " + (q.overflow == Overflow::block ? "block" : "drop_oldest") + ", max_subscribers " +
-           std::to_string(q.max_subscribers) + ", max_held " + std::to_string(q.max_held);
   }
 
   static std::string program_name() {
@@ -111,9 +169,7 @@ class Core : public ErasedChainRuntime {
     return name;
   }
 
-  std::string domain_;
-  DomainOptions options_;
-  detail::Registry registry_;
+  std::shared_ptr<detail::Registry> registry_;
   std::mutex mutex_;
   std::map<std::string, std::weak_ptr<detail::Topic>> topics_;
 };

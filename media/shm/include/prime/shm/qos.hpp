@@ -8,24 +8,32 @@
 
 namespace prime::shm {
 
-// How a topic is laid out and behaves, chosen at run time. It belongs to the
-// topic: whoever opens it first (publisher or subscriber) creates it with
-// these values, and a publisher that asks for others later is refused with
-// both named. Keep one constant per topic and use it at both ends.
+// How a topic is laid out and behaves, chosen at run time. Whoever opens the
+// topic first (publisher or subscriber) creates it with these values; anyone
+// who opens it later with others is refused with both named
+// (Errc::qos_mismatch), whichever side started first. Keep one constant per
+// topic and use it at both ends.
+//
+// A topic takes  ring + (capacity + max_subscribers × max_held + 2) ×
+// round_up(64 + max_message_size, 64)  bytes of /dev/shm, all reserved when
+// it is created; shm::topic_memory<T>(qos) computes it.
 struct TopicQos {
   std::size_t capacity = 64;  // samples a subscriber may fall behind (and history it may ask for)
   // Largest message in bytes; 0 means sizeof(T). Raw byte topics must set it.
   std::size_t max_message_size = 0;
   Overflow overflow = Overflow::drop_oldest;
-  // How long a `block` publisher's loan waits for the slowest live subscriber
-  // before it fails with Errc::timeout (naming the topic and that subscriber).
+  // The publisher's (not compared between the two sides): how long a `block`
+  // publisher waits for a subscriber that reads nothing. Past it, that
+  // subscriber is reported once on core.errors() and no longer waited for
+  // (it loses what is overwritten before it reads it, counted in its
+  // lost()) until it has caught up.
   std::chrono::milliseconds block_timeout{1000};
-  std::size_t max_subscribers = 8;  // live subscriptions at once (at most 62)
-  // Samples each subscriber may hold at once (views alive); the publisher
-  // always has a free slot while subscribers keep to this. 0 means the
-  // capacity, so that read_all() is always safe; set it lower for topics of
-  // large messages, whose slots all take memory.
-  std::size_t max_held = 0;
+  std::size_t max_subscribers = 8;  // subscribers at once (at most 61; one more slot is kept for tools)
+  // Samples each subscriber may hold at once (views alive). The topic's
+  // memory is sized for it, and each reader keeps to it: past it, a reader
+  // reads on only once it releases a view. A sync over the topic keeps
+  // about three quarters of it waiting for a match (at least 4 to sync).
+  std::size_t max_held = 8;
 };
 
 // One subscriber's own choices.

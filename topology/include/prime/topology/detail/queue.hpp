@@ -13,15 +13,10 @@
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
+#include "prime/topology/detail/wait.hpp"
 #include "prime/topology/qos.hpp"
 
 namespace prime::detail {
-
-inline void cpu_relax() noexcept {
-#if defined(__x86_64__) || defined(__i386__)
-  __builtin_ia32_pause();
-#endif
-}
 
 // One reader's bounded buffer: a ring of `capacity` slots that never grows.
 // Many writers (every producer of the source), one reader.
@@ -118,23 +113,27 @@ class Queue {
     return sample;
   }
 
+  // With the lock held on entry and on return: until a value is in the
+  // buffer, spinning without the lock first, then asleep on the condition.
   std::expected<void, Errc> wait_for_value(std::unique_lock<std::mutex>& lock, Clock::time_point deadline,
                                            std::stop_token stop) {
     if (size_ > 0) return {};
-    if (spin_.count() > 0) {
-      lock.unlock();
-      const auto until = std::min(deadline, Clock::now() + spin_);
-      while (size_.load(std::memory_order_relaxed) == 0 && !stop.stop_requested() && Clock::now() < until) cpu_relax();
-      lock.lock();
-      if (size_ > 0) return {};
-    }
-    ++waiting_readers_;
-    const auto ready = [&] { return size_ > 0; };
-    const bool got = deadline == Clock::time_point::max() ? not_empty_.wait(lock, stop, ready)
-                                                          : not_empty_.wait_until(lock, stop, deadline, ready);
-    --waiting_readers_;
-    if (!got) return std::unexpected(stop.stop_requested() ? Errc::stopped : Errc::timeout);
-    return {};
+    lock.unlock();
+    auto filled = [&] { return size_.load(std::memory_order_relaxed) > 0; };
+    auto sleep = [&](Clock::time_point until) {
+      std::unique_lock asleep{mutex_};
+      ++waiting_readers_;
+      const auto ready = [&] { return size_ > 0; };
+      if (until == Clock::time_point::max())
+        not_empty_.wait(asleep, stop, ready);
+      else
+        not_empty_.wait_until(asleep, stop, until, ready);
+      --waiting_readers_;
+    };
+    const auto waited = spin_then_sleep(filled, sleep, spin_, deadline, stop);
+    lock.lock();
+    if (size_ > 0) return {};
+    return std::unexpected(waited == Waited::stopped ? Errc::stopped : Errc::timeout);
   }
 
   void wake_writers(std::unique_lock<std::mutex>& lock) {

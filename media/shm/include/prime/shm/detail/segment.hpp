@@ -1,51 +1,83 @@
 #pragma once
 
+#include <sys/stat.h>
+#include <sys/statvfs.h>
+
 #include <boost/interprocess/mapped_region.hpp>
 #include <boost/interprocess/shared_memory_object.hpp>
 
 #include <cctype>
+#include <cerrno>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
+#include <fcntl.h>
 #include <optional>
 #include <string>
 #include <string_view>
+#include <unistd.h>
 
 #include "prime/common/fingerprint.hpp"
 #include "prime/logic/error.hpp"
+#include "prime/shm/detail/file_lock.hpp"
 
 namespace prime::shm::detail {
 
 namespace bip = boost::interprocess;
 
+inline constexpr const char* kShmDirectory = "/dev/shm";
+
+// Bytes free for shared memory on this machine (in this mount namespace).
+[[nodiscard]] inline std::uint64_t shm_bytes_free() {
+  struct statvfs fs {};
+  if (::statvfs(kShmDirectory, &fs) != 0) return 0;
+  return static_cast<std::uint64_t>(fs.f_bavail) * fs.f_frsize;
+}
+
 // One named POSIX shared-memory segment, mapped read-write into this process
-// for as long as the object lives. Boost.Interprocess creates, sizes, maps and
-// removes it; nothing here synchronises: what lives inside does that itself.
+// for as long as the object lives, with its descriptor kept open (the
+// registry's liveness locks live on it). Boost.Interprocess opens, maps and
+// removes it; nothing here synchronises what lives inside.
 class Segment {
  public:
-  // Creates `name` with `size` bytes (zero-filled) and `permissions`, or
-  // nothing when it exists already.
-  static std::optional<Segment> create(const std::string& name, std::size_t size, unsigned permissions) {
-    try {
-      bip::permissions perm;
-      perm.set_permissions(permissions);
-      bip::shared_memory_object object{bip::create_only, name.c_str(), bip::read_write, perm};
-      object.truncate(static_cast<bip::offset_t>(size));
-      return Segment{name, std::move(object)};
-    } catch (const bip::interprocess_exception& e) {
-      if (e.get_error_code() == bip::already_exists_error) return std::nullopt;
-      throw Failure{{Errc::unreachable, "shared memory '" + name + "': cannot create: " + e.what()}};
+  // Opens `name`, creating it when missing. The opener holds the segment's
+  // set-up lock (a lock on its byte 0, dropped by the kernel if the holder
+  // dies) while it looks: when `is_ready(data, size)` says the contents are
+  // not set up (it is new, or its creator died half-way), this opener sizes
+  // it to `size`, reserving every byte now (posix_fallocate: a full
+  // /dev/shm is an error here, never a SIGBUS later), and calls
+  // `set_up(data, size)`. Errors name `what`.
+  template <class IsReady, class SetUp>
+  static Segment open(const std::string& name, unsigned permissions, std::size_t size, const std::string& what,
+                      IsReady&& is_ready, SetUp&& set_up) {
+    while (true) {
+      Segment segment{name, open_object(name, permissions, what)};
+      lock_byte(segment.fd(), 0, what + " (being set up)");
+      struct Unlock {
+        int fd;
+        ~Unlock() { unlock_byte(fd, 0); }
+      } unlock{segment.fd()};
+      if (!segment.linked()) continue;  // removed while we waited: open what replaced it
+      if (segment.file_size() > 0) {
+        segment.map();
+        if (is_ready(segment.data(), segment.size())) return segment;
+      }
+      segment.reserve(size, what);
+      segment.map();
+      set_up(segment.data(), segment.size());
+      return segment;
     }
   }
 
   // Maps the existing segment `name`, or nothing when there is none (or it
-  // is still being sized by its creator).
-  static std::optional<Segment> open(const std::string& name) {
+  // is still empty). For inspection: it takes no lock.
+  static std::optional<Segment> open_existing(const std::string& name) {
     try {
-      bip::shared_memory_object object{bip::open_only, name.c_str(), bip::read_write};
-      bip::offset_t size = 0;
-      if (!object.get_size(size) || size == 0) return std::nullopt;
-      return Segment{name, std::move(object)};
+      Segment segment{name, bip::shared_memory_object{bip::open_only, name.c_str(), bip::read_write}};
+      if (segment.file_size() == 0) return std::nullopt;
+      segment.map();
+      return segment;
     } catch (const bip::interprocess_exception& e) {
       if (e.get_error_code() == bip::not_found_error) return std::nullopt;
       throw Failure{{Errc::unreachable, "shared memory '" + name + "': cannot open: " + e.what()}};
@@ -57,23 +89,63 @@ class Segment {
   [[nodiscard]] std::byte* data() const noexcept { return static_cast<std::byte*>(region_.get_address()); }
   [[nodiscard]] std::size_t size() const noexcept { return region_.get_size(); }
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
+  [[nodiscard]] int fd() const noexcept { return object_.get_mapping_handle().handle; }
 
  private:
-  Segment(std::string name, bip::shared_memory_object object)
-      : name_{std::move(name)}, region_{object, bip::read_write} {}
+  Segment(std::string name, bip::shared_memory_object object) : name_{std::move(name)}, object_{std::move(object)} {}
+
+  static bip::shared_memory_object open_object(const std::string& name, unsigned permissions, const std::string& what) {
+    try {
+      bip::permissions perm;
+      perm.set_permissions(permissions);
+      return bip::shared_memory_object{bip::open_or_create, name.c_str(), bip::read_write, perm};
+    } catch (const bip::interprocess_exception& e) {
+      throw Failure{{Errc::unreachable, what + ": cannot open shared memory '" + name + "': " + e.what()}};
+    }
+  }
+
+  [[nodiscard]] std::size_t file_size() const {
+    struct stat st {};
+    return ::fstat(fd(), &st) == 0 ? static_cast<std::size_t>(st.st_size) : 0;
+  }
+
+  // Whether the name still leads to this segment.
+  [[nodiscard]] bool linked() const {
+    struct stat mine {}, named {};
+    const auto path = std::string{kShmDirectory} + "/" + name_;
+    return ::fstat(fd(), &mine) == 0 && ::stat(path.c_str(), &named) == 0 && mine.st_ino == named.st_ino &&
+           mine.st_dev == named.st_dev;
+  }
+
+  void reserve(std::size_t size, const std::string& what) {
+    region_ = bip::mapped_region{};
+    const auto free = shm_bytes_free() + file_size();  // what it has already counts as free to it
+    int error = ::ftruncate(fd(), static_cast<off_t>(size)) == 0 ? 0 : errno;
+    if (error == 0) error = ::posix_fallocate(fd(), 0, static_cast<off_t>(size));
+    if (error == 0) return;
+    remove(name_);  // nobody uses a segment that was never set up
+    const bool full = error == ENOSPC || error == EFBIG || error == ENOMEM;
+    throw Failure{{full ? Errc::no_space : Errc::unreachable,
+                   what + ": needs " + std::to_string(size) + " bytes of shared memory, but " + kShmDirectory +
+                       " has " + std::to_string(free) + " bytes free (" + std::strerror(error) + ")"}};
+  }
+
+  void map() { region_ = bip::mapped_region{object_, bip::read_write}; }
 
   std::string name_;
-  bip::mapped_region region_;  // the mapping outlives the descriptor, which closes here
+  bip::shared_memory_object object_;
+  bip::mapped_region region_;
 };
 
-// The segment name for `what` in `domain`: "prime.<domain>.<what>", with
-// anything but [A-Za-z0-9_.-] escaped so topic paths ("lidar/scan") fit, and
-// long names shortened with a hash so they stay under NAME_MAX.
+// The segment name for `what` in `domain`: "prime.<domain>.<kind>.<what>",
+// with anything but [A-Za-z0-9_-] escaped (so "." only separates, and domain
+// "a.b" with topic "c" never meets domain "a" with topic "b.c"), and long
+// names shortened with a hash so they stay under NAME_MAX.
 inline std::string segment_name(std::string_view domain, std::string_view kind, std::string_view what) {
   std::string name = "prime.";
   auto append = [&name](std::string_view part) {
     for (unsigned char c : part) {
-      if (std::isalnum(c) || c == '_' || c == '-' || c == '.') {
+      if (std::isalnum(c) || c == '_' || c == '-') {
         name.push_back(static_cast<char>(c));
       } else {
         char hex[4];
@@ -89,8 +161,7 @@ inline std::string segment_name(std::string_view domain, std::string_view kind, 
   append(what);
   if (name.size() > 200) {
     char hash[20];
-    std::snprintf(hash, sizeof hash, "#%016llx",
-                  static_cast<unsigned long long>(prime::detail::fnv1a(name)));
+    std::snprintf(hash, sizeof hash, "#%016llx", static_cast<unsigned long long>(prime::detail::fnv1a(name)));
     name = name.substr(0, 180) + hash;
   }
   return name;

@@ -1,0 +1,152 @@
+#pragma once
+
+#include <algorithm>
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "prime/logic/error.hpp"
+#include "prime/shm/detail/layout.hpp"
+#include "prime/shm/detail/topic.hpp"
+
+namespace prime::shm::detail {
+
+// A sample taken by a subscriber: its chunk, held by the subscriber's bit
+// until released.
+struct Taken {
+  std::uint32_t chunk;
+  std::uint64_t seq;
+};
+
+// One subscriber slot's cursor over a topic.
+//
+// Not thread-safe: one thread at a time takes; releasing is thread-safe.
+class Cursor {
+ public:
+  // Takes a free subscriber slot, or (`observer`) the slot kept for tools,
+  // whose cursor no `block` publisher ever waits for.
+  Cursor(std::shared_ptr<Topic> topic, std::size_t history, bool observer = false) : topic_{std::move(topic)} {
+    auto& h = topic_->header();
+    const auto me = topic_->registry().me();
+    const auto first = observer ? kSlots - 1 : 0;
+    const auto end = observer ? kSlots : h.max_subscribers;
+    for (int pass = 0; pass < 2 && slot_ == kNone; ++pass) {
+      for (std::size_t i = first; i < end; ++i) {
+        ParticipantId free = 0;
+        if (h.subscribers[i].owner.compare_exchange_strong(free, me)) {
+          slot_ = i;
+          break;
+        }
+      }
+      if (slot_ == kNone && topic_->reclaim_dead_subscribers() == 0) break;
+    }
+    if (slot_ == kNone)
+      throw Failure{{Errc::limit_exceeded, observer ? "topic '" + topic_->name() + "' is observed already"
+                                                    : "topic '" + topic_->name() + "' has its maximum of " +
+                                                          std::to_string(h.max_subscribers) + " subscribers"}};
+    bit_ = 1ull << slot_;
+    topic_->release_subscriber_holds(slot_);  // nothing of an earlier owner lingers
+    h.subscribers[slot_].lagging.store(0);
+    const auto head = h.head.load();
+    const auto back = std::min<std::uint64_t>({history, h.capacity, head});
+    next_ = head - back;
+    h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
+  }
+  Cursor(const Cursor&) = delete;
+  Cursor& operator=(const Cursor&) = delete;
+  ~Cursor() {
+    auto& slot = topic_->header().subscribers[slot_];
+    slot.cursor.store(kNoCursor);
+    // Views own the cursor jointly with the reader, so none is out by now.
+    topic_->release_subscriber_holds(slot_);
+    slot.lagging.store(0);
+    slot.owner.store(0);
+    topic_->wake_publisher();
+  }
+
+  [[nodiscard]] const std::shared_ptr<Topic>& topic() const noexcept { return topic_; }
+  [[nodiscard]] std::uint64_t bit() const noexcept { return bit_; }
+
+  // The next sample, if one is published and unread. Looks at one ring
+  // entry (one cache line) when none is.
+  std::optional<Taken> try_take() {
+    auto& h = topic_->header();
+    while (true) {
+      const auto entry = topic_->ring(next_).load(std::memory_order_acquire);
+      const auto ahead = RingEntry::ahead(entry, next_);
+      if (ahead < 0) {
+        caught_up();
+        return std::nullopt;
+      }
+      if (ahead == 0) {
+        const auto index = RingEntry::chunk(entry);
+        auto& chunk = topic_->chunk(index);
+        __builtin_prefetch(topic_->payload(index));  // arrives while the hold is taken
+        chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
+        if (chunk.seq.load(std::memory_order_seq_cst) == next_) {
+          const Taken taken{index, next_};
+          advance(next_ + 1);
+          return taken;
+        }
+        chunk.holders.fetch_and(~bit_);
+      }
+      // Overwritten before we took it: lost to us. Skip to the oldest still
+      // in the ring.
+      const auto head = h.head.load(std::memory_order_acquire);
+      skip_to(std::max(next_ + 1, head > h.capacity ? head - h.capacity : 0));
+    }
+  }
+
+  // Moves on to the newest sample published, passing over the older unread
+  // ones (read past, not lost): for a reader that wants only the latest.
+  void skip_to_newest() {
+    const auto head = topic_->header().head.load(std::memory_order_acquire);
+    if (head > next_ + 1) advance(head - 1);
+  }
+
+  // Whether the next sample (or a later one) is out: the ring entry, for a
+  // busy poll...
+  [[nodiscard]] bool ready() const noexcept {
+    return RingEntry::ahead(topic_->ring(next_).load(std::memory_order_acquire), next_) >= 0;
+  }
+  // ...and the head, for a sleeper: the publisher stores it seq_cst before it
+  // looks for sleepers.
+  [[nodiscard]] bool available() const noexcept {
+    return topic_->header().head.load(std::memory_order_seq_cst) > next_;
+  }
+
+  void release(std::uint32_t chunk) const noexcept { topic_->chunk(chunk).holders.fetch_and(~bit_); }
+
+  [[nodiscard]] std::uint64_t lost() const noexcept { return lost_; }
+
+ private:
+  static constexpr std::size_t kNone = ~std::size_t{0};
+
+  void skip_to(std::uint64_t seq) {
+    lost_ += seq - next_;
+    advance(seq);
+  }
+  void advance(std::uint64_t seq) {
+    next_ = seq;
+    auto& h = topic_->header();
+    h.subscribers[slot_].cursor.store(seq, std::memory_order_seq_cst);
+    if (seq >= h.space_wanted.load(std::memory_order_seq_cst)) topic_->wake_publisher();
+  }
+  // A subscriber the publisher stopped waiting for is waited for again once
+  // it has read everything.
+  void caught_up() {
+    auto& lagging = topic_->header().subscribers[slot_].lagging;
+    if (lagging.load(std::memory_order_relaxed) != 0) lagging.store(0);
+  }
+
+  std::shared_ptr<Topic> topic_;
+  std::size_t slot_ = kNone;
+  std::uint64_t bit_ = 0;
+  std::uint64_t next_ = 0;
+  std::uint64_t lost_ = 0;
+};
+
+}  // namespace prime::shm::detail

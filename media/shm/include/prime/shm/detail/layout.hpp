@@ -1,0 +1,141 @@
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+
+#include "prime/common/fingerprint.hpp"
+#include "prime/shm/detail/doorbell.hpp"
+
+namespace prime::shm::detail {
+
+// What lives in a topic's shared memory. Everything is plain data or
+// lock-free atomics, addressed by offsets from the segment's start (no
+// pointers), so each process may map it anywhere.
+//
+//   TopicHeader | ring: capacity × RingEntry word | chunks: chunk_count × (ChunkHeader + payload)
+//
+// Samples live in chunks. The ring names the chunks of the last `capacity`
+// sequences; a chunk is free when no one holds it. Who holds a chunk is one
+// word of bits: one per subscriber slot, one for the ring and one for the
+// publisher's loan. So a subscriber reads a sample in place for as long as
+// it likes, the publisher never reuses a chunk someone reads, and a dead
+// subscriber's holds are cleared by clearing its bit everywhere.
+
+static_assert(std::atomic<std::uint64_t>::is_always_lock_free, "shared memory needs lock-free 64-bit atomics");
+static_assert(std::atomic<std::uint32_t>::is_always_lock_free, "shared memory needs lock-free 32-bit atomics");
+
+// A participant of a domain: its slot in the registry and that slot's
+// generation, so a later participant in the same slot is another one.
+// Zero means nobody.
+using ParticipantId = std::uint64_t;
+inline constexpr ParticipantId kReclaiming = ~0ull;  // a slot whose dead owner is being cleared
+
+inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d33ull;  // "PRIMESM3"
+inline constexpr std::uint32_t kLayoutVersion = 3;
+// Subscriber slots a topic may offer; one more is kept for tools that observe.
+inline constexpr std::size_t kMaxSubscribers = 61;
+inline constexpr std::size_t kSlots = kMaxSubscribers + 1;
+inline constexpr std::uint64_t kRingBit = 1ull << 63;
+inline constexpr std::uint64_t kLoanBit = 1ull << 62;
+static_assert(kSlots <= 62, "a chunk's holders word has one bit per slot, plus the ring's and the loan's");
+inline constexpr std::uint64_t kNotPublished = ~0ull;  // a chunk's sequence when it carries none
+inline constexpr std::uint32_t kNoChunk = (1u << 24) - 1;
+inline constexpr std::uint64_t kNoCursor = ~0ull;      // a subscriber slot not (yet) reading
+inline constexpr std::size_t kPayloadAlignment = 64;
+inline constexpr std::uint64_t kPublisherSleeper = 1;  // the space doorbell's one sleeper
+
+// A ring entry: which chunk carries which sequence, in one word, so that a
+// busy subscriber polls one cache line and learns both that its next sample
+// is out and where it is. The sequence is kept modulo 2^40 (compared with
+// wrap-around); the full one is in the chunk, which a subscriber checks.
+struct RingEntry {
+  static constexpr int kChunkBits = 24;
+  static constexpr int kSeqBits = 40;
+  static constexpr std::uint64_t kSeqMask = (1ull << kSeqBits) - 1;
+
+  static constexpr std::uint64_t pack(std::uint64_t seq, std::uint32_t chunk) noexcept {
+    return ((seq & kSeqMask) << kChunkBits) | chunk;
+  }
+  static constexpr std::uint32_t chunk(std::uint64_t entry) noexcept {
+    return static_cast<std::uint32_t>(entry & ((1u << kChunkBits) - 1));
+  }
+  // How far the entry's sequence is ahead of `seq`: 0 when it carries it,
+  // negative while it still holds an older one, positive once overwritten.
+  static constexpr std::int64_t ahead(std::uint64_t entry, std::uint64_t seq) noexcept {
+    const auto d = ((entry >> kChunkBits) - seq) & kSeqMask;
+    constexpr auto half = 1ull << (kSeqBits - 1);
+    return d >= half ? static_cast<std::int64_t>(d) - static_cast<std::int64_t>(1ull << kSeqBits)
+                     : static_cast<std::int64_t>(d);
+  }
+};
+static_assert(RingEntry::kChunkBits + RingEntry::kSeqBits == 64);
+
+struct alignas(kPayloadAlignment) ChunkHeader {
+  std::atomic<std::uint64_t> holders{0};
+  std::atomic<std::uint64_t> seq{kNotPublished};
+  std::uint64_t size = 0;   // bytes of payload in use
+  std::int64_t stamp = 0;   // steady_clock ticks (CLOCK_MONOTONIC: one clock for every process)
+};
+static_assert(sizeof(ChunkHeader) == kPayloadAlignment, "a payload starts one cache line after its chunk");
+
+struct alignas(64) SubscriberSlot {
+  std::atomic<ParticipantId> owner{0};
+  std::atomic<std::uint64_t> cursor{kNoCursor};  // the next sequence it takes
+  // On a `block` topic: set when the publisher stopped waiting for this
+  // subscriber (it read nothing for block_timeout); it is then passed over
+  // like a drop_oldest reader, until it has caught up and clears this.
+  std::atomic<std::uint32_t> lagging{0};
+};
+static_assert(sizeof(SubscriberSlot) == 64, "each subscriber's cursor on a line of its own");
+
+struct TopicHeader {
+  std::atomic<std::uint64_t> magic{0};  // kTopicMagic once the creator has set everything below
+  std::uint32_t layout = kLayoutVersion;
+  std::uint32_t overflow = 0;
+  Fingerprint type{};
+  std::uint64_t capacity = 0;
+  std::uint64_t chunk_count = 0;
+  std::uint64_t max_message_size = 0;
+  std::uint64_t chunk_stride = 0;
+  std::uint64_t max_subscribers = 0;
+  std::uint64_t max_held = 0;
+  std::uint64_t ring_offset = 0;
+  std::uint64_t chunks_offset = 0;
+
+  alignas(64) std::atomic<ParticipantId> publisher{0};
+  std::atomic<std::int64_t> block_timeout_ns{0};  // the current publisher's
+  alignas(64) std::atomic<std::uint64_t> head{0};  // sequences published so far
+  Doorbell data;   // rung when a sample is published; sleepers are subscriber slots' bits
+  Doorbell space;  // rung when the slowest subscriber reaches `space_wanted` (a `block` publisher waits)
+  alignas(64) std::atomic<std::uint64_t> space_wanted{~0ull};
+  SubscriberSlot subscribers[kSlots];
+};
+static_assert(offsetof(TopicHeader, publisher) % 64 == 0 && offsetof(TopicHeader, head) % 64 == 0 &&
+                  offsetof(TopicHeader, space_wanted) % 64 == 0 && offsetof(TopicHeader, subscribers) % 64 == 0,
+              "the lines publisher and subscribers write do not share with each other");
+
+inline constexpr std::size_t round_up(std::size_t n, std::size_t to) { return (n + to - 1) / to * to; }
+
+// Where the parts of a topic's segment lie, from its QoS and message size.
+struct TopicGeometry {
+  std::size_t capacity;
+  std::size_t max_message_size;
+  std::size_t max_subscribers;
+  std::size_t max_held;
+
+  // The ring's chunks; every subscriber's allowance of held samples that the
+  // ring no longer names; one that an observing tool may hold; one the
+  // publisher loans.
+  [[nodiscard]] constexpr std::size_t chunk_count() const { return capacity + max_subscribers * max_held + 2; }
+  [[nodiscard]] constexpr std::size_t ring_offset() const { return round_up(sizeof(TopicHeader), kPayloadAlignment); }
+  [[nodiscard]] constexpr std::size_t chunks_offset() const {
+    return round_up(ring_offset() + capacity * sizeof(std::uint64_t), kPayloadAlignment);
+  }
+  [[nodiscard]] constexpr std::size_t chunk_stride() const {
+    return round_up(sizeof(ChunkHeader) + max_message_size, kPayloadAlignment);
+  }
+  [[nodiscard]] constexpr std::size_t bytes() const { return chunks_offset() + chunk_count() * chunk_stride(); }
+};
+
+}  // namespace prime::shm::detail

@@ -1,0 +1,281 @@
+#pragma once
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <mutex>
+#include <new>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "prime/logic/error.hpp"
+#include "prime/shm/detail/file_lock.hpp"
+#include "prime/shm/detail/layout.hpp"
+#include "prime/shm/detail/segment.hpp"
+#include "prime/shm/registry.hpp"
+
+namespace prime::shm::detail {
+
+inline constexpr std::uint64_t kRegistryMagic = 0x5052494d45524732ull;  // "PRIMERG2"
+inline constexpr std::size_t kMaxParticipants = 128;
+inline constexpr std::size_t kMaxTopics = 512;
+inline constexpr std::size_t kNameCapacity = 244;
+inline constexpr int kSlotBits = 8;
+static_assert(kMaxParticipants < (1u << kSlotBits));
+
+// The registry segment. Its file carries the domain's locks: byte 0 guards
+// changes to the table (and setting the segment up); byte 1 + i is the lease
+// of participant slot i, held by that participant for as long as it lives.
+struct RegistryLayout {
+  struct Participant {
+    std::atomic<ParticipantId> id{0};
+    std::uint32_t pid = 0;
+    std::uint64_t pid_namespace = 0;
+    char name[48]{};
+  };
+  struct TopicEntry {
+    std::uint32_t used = 0;
+    char name[kNameCapacity]{};
+  };
+  std::atomic<std::uint64_t> magic{0};
+  std::atomic<std::uint64_t> generation{0};  // participant ids handed out so far
+  Participant participants[kMaxParticipants];
+  TopicEntry topics[kMaxTopics];
+};
+
+[[nodiscard]] inline std::uint64_t own_pid_namespace() {
+  struct stat st {};
+  return ::stat("/proc/self/ns/pid", &st) == 0 ? static_cast<std::uint64_t>(st.st_ino) : 0;
+}
+
+// This participant's membership of a domain: its lease in the registry, and
+// the registry's table of participants and topics. A participant is alive
+// while it holds its lease; the kernel drops the lease when it dies, in any
+// pid namespace, so nothing here reads another process's /proc. Topics,
+// publishers and subscribers hold this jointly with the Core: the
+// participant leaves when the last of them goes, and the last participant
+// to leave removes the domain's segments.
+//
+// Thread-safe.
+class Registry : public std::enable_shared_from_this<Registry> {
+ public:
+  // Joins `domain` as `name`. When no participant of an earlier run is alive,
+  // that run's topics are removed first.
+  static std::shared_ptr<Registry> join(const std::string& domain, unsigned permissions, const std::string& name) {
+    if (domain.empty()) throw Failure{{Errc::limit_exceeded, "shm: a domain needs a name"}};
+    while (true) {
+      auto registry = std::shared_ptr<Registry>{new Registry{domain, permissions}};
+      if (registry->enter(name)) return registry;
+    }
+  }
+  Registry(const Registry&) = delete;
+  Registry& operator=(const Registry&) = delete;
+  ~Registry() { leave(); }
+
+  [[nodiscard]] const std::string& domain() const noexcept { return domain_; }
+  [[nodiscard]] unsigned permissions() const noexcept { return permissions_; }
+  [[nodiscard]] ParticipantId me() const noexcept { return me_; }
+
+  // Whether the participant `id` still lives: it is still in its slot, and
+  // someone holds that slot's lease. One system call.
+  [[nodiscard]] bool alive(ParticipantId id) const {
+    if (id == 0 || id == kReclaiming) return false;
+    if (id == me_) return true;
+    const auto slot = slot_of(id);
+    if (slot >= kMaxParticipants || layout().participants[slot].id.load() != id) return false;
+    return locked_by_other(segment_.fd(), lease_byte(slot));
+  }
+
+  // "participant 'planner' (pid 42)", for errors that name a peer.
+  [[nodiscard]] std::string describe(ParticipantId id) const {
+    const auto slot = slot_of(id);
+    if (id == 0 || id == kReclaiming || slot >= kMaxParticipants) return "no participant";
+    const auto& p = layout().participants[slot];
+    if (p.id.load() != id) return "a participant that left";
+    std::string text = "participant '" + std::string{p.name} + "' (pid " + std::to_string(p.pid);
+    if (p.pid_namespace != pid_namespace_) text += " in another pid namespace";
+    return text + ")";
+  }
+  [[nodiscard]] std::uint32_t pid_of(ParticipantId id) const {
+    const auto slot = slot_of(id);
+    if (slot >= kMaxParticipants) return 0;
+    const auto& p = layout().participants[slot];
+    return p.id.load() == id ? p.pid : 0;
+  }
+  [[nodiscard]] std::string name_of(ParticipantId id) const {
+    const auto slot = slot_of(id);
+    if (slot >= kMaxParticipants) return {};
+    const auto& p = layout().participants[slot];
+    return p.id.load() == id ? std::string{p.name} : std::string{};
+  }
+
+  // Lists `name` among the domain's topics.
+  void add_topic(const std::string& name) {
+    if (name.size() >= kNameCapacity)
+      throw Failure{{Errc::limit_exceeded, "topic '" + name + "': names are at most " +
+                                               std::to_string(kNameCapacity - 1) + " characters"}};
+    Locked lock{*this};
+    auto& r = layout();
+    RegistryLayout::TopicEntry* free = nullptr;
+    for (auto& t : r.topics) {
+      if (t.used && name == t.name) return;
+      if (!t.used && !free) free = &t;
+    }
+    if (!free)
+      throw Failure{{Errc::limit_exceeded, "shm domain '" + domain_ + "' has its maximum of " +
+                                               std::to_string(kMaxTopics) + " topics"}};
+    copy_name(free->name, name);
+    free->used = 1;
+  }
+
+  // The names of the domain's topics.
+  [[nodiscard]] std::vector<std::string> topics() {
+    Locked lock{*this};
+    std::vector<std::string> names;
+    for (auto& t : layout().topics)
+      if (t.used) names.emplace_back(t.name);
+    return names;
+  }
+
+  // The participants, as the table lists them now.
+  [[nodiscard]] std::vector<RegistrySnapshot::Participant> participants() {
+    Locked lock{*this};
+    std::vector<RegistrySnapshot::Participant> list;
+    for (auto& p : layout().participants) {
+      const auto id = p.id.load();
+      if (id != 0) list.push_back({p.name, p.pid, p.pid_namespace, alive(id)});
+    }
+    return list;
+  }
+
+  // Forgets participants that died without leaving; returns them.
+  std::size_t forget_dead_participants() {
+    Locked lock{*this};
+    std::size_t n = 0;
+    for (auto& p : layout().participants) {
+      auto id = p.id.load();
+      if (id != 0 && !alive(id) && p.id.compare_exchange_strong(id, 0)) ++n;
+    }
+    return n;
+  }
+
+ private:
+  Registry(std::string domain, unsigned permissions)
+      : domain_{std::move(domain)},
+        permissions_{permissions},
+        pid_namespace_{own_pid_namespace()},
+        segment_{Segment::open(
+            segment_name(domain_, "registry", ""), permissions_, sizeof(RegistryLayout), "shm domain '" + domain_ + "'",
+            [this](std::byte* data, std::size_t size) { return is_set_up(data, size); },
+            [](std::byte* data, std::size_t) {
+              auto* r = ::new (data) RegistryLayout{};
+              r->magic.store(kRegistryMagic, std::memory_order_release);
+            })} {}
+
+  bool is_set_up(std::byte* data, std::size_t size) const {
+    if (size < sizeof(std::uint64_t)) return false;
+    const auto magic = std::launder(reinterpret_cast<RegistryLayout*>(data))->magic.load(std::memory_order_acquire);
+    if (magic == 0) return false;
+    if (magic != kRegistryMagic || size < sizeof(RegistryLayout))
+      throw Failure{{Errc::type_mismatch, "shm domain '" + domain_ + "': its registry was made by another version of Prime"}};
+    return true;
+  }
+
+  // Takes a slot and its lease. False when the domain was removed meanwhile
+  // (its last participant left): join again.
+  bool enter(const std::string& name) {
+    Locked lock{*this};
+    auto& r = layout();
+    if (r.magic.load() != kRegistryMagic) return false;
+    const bool anyone_alive = std::any_of(std::begin(r.participants), std::end(r.participants),
+                                          [this](const auto& p) { return alive(p.id.load()); });
+    if (!anyone_alive) {  // an earlier run died: start the domain afresh
+      for (auto& t : r.topics) forget(t);
+      for (auto& p : r.participants) p.id.store(0);
+    }
+    for (std::size_t i = 0; i < kMaxParticipants; ++i) {
+      if (!try_lock_byte(segment_.fd(), lease_byte(i))) continue;  // a live participant's
+      auto& p = r.participants[i];
+      me_ = ((r.generation.fetch_add(1) + 1) << kSlotBits) | (i + 1);
+      p.pid = static_cast<std::uint32_t>(::getpid());
+      p.pid_namespace = pid_namespace_;
+      copy_name(p.name, name);
+      p.id.store(me_);
+      return true;
+    }
+    throw Failure{{Errc::limit_exceeded, "shm domain '" + domain_ + "' has its maximum of " +
+                                             std::to_string(kMaxParticipants) + " participants"}};
+  }
+
+  void leave() noexcept {
+    if (me_ == 0) return;
+    try {
+      Locked lock{*this};
+      auto& r = layout();
+      const auto slot = slot_of(me_);
+      r.participants[slot].id.store(0);
+      unlock_byte(segment_.fd(), lease_byte(slot));
+      me_ = 0;
+      const bool anyone_alive = std::any_of(std::begin(r.participants), std::end(r.participants),
+                                            [this](const auto& p) { return alive(p.id.load()); });
+      if (!anyone_alive) {
+        for (auto& t : r.topics) forget(t);
+        r.magic.store(0);
+        Segment::remove(segment_.name());
+      }
+    } catch (...) {
+      // The lease goes with the descriptor: others see this participant gone.
+    }
+  }
+
+  // The table lock: one thread of this process (the mutex) and one
+  // participant of the domain (the lock on byte 0) at a time.
+  class Locked {
+   public:
+    explicit Locked(const Registry& r) : r_{r}, guard_{r.mutex_} {
+      lock_byte(r_.segment_.fd(), 0, "shm domain '" + r_.domain_ + "' registry");
+    }
+    ~Locked() { unlock_byte(r_.segment_.fd(), 0); }
+    Locked(const Locked&) = delete;
+    Locked& operator=(const Locked&) = delete;
+
+   private:
+    const Registry& r_;
+    std::scoped_lock<std::mutex> guard_;
+  };
+
+  [[nodiscard]] RegistryLayout& layout() const {
+    return *std::launder(reinterpret_cast<RegistryLayout*>(segment_.data()));
+  }
+  static std::size_t slot_of(ParticipantId id) { return static_cast<std::size_t>(id & ((1u << kSlotBits) - 1)) - 1; }
+  static off_t lease_byte(std::size_t slot) { return static_cast<off_t>(1 + slot); }
+
+  void forget(RegistryLayout::TopicEntry& t) {
+    if (!t.used) return;
+    Segment::remove(segment_name(domain_, "topic", t.name));
+    t.used = 0;
+    t.name[0] = '\0';
+  }
+
+  template <std::size_t N>
+  static void copy_name(char (&to)[N], const std::string& from) {
+    const auto n = std::min(from.size(), N - 1);
+    std::memcpy(to, from.data(), n);
+    to[n] = '\0';
+  }
+
+  std::string domain_;
+  unsigned permissions_;
+  std::uint64_t pid_namespace_;
+  mutable std::mutex mutex_;
+  Segment segment_;
+  ParticipantId me_ = 0;
+};
+
+}  // namespace prime::shm::detail

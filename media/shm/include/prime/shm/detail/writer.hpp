@@ -1,0 +1,234 @@
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <expected>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <stop_token>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "prime/logic/error.hpp"
+#include "prime/logic/sample.hpp"
+#include "prime/shm/detail/layout.hpp"
+#include "prime/shm/detail/topic.hpp"
+#include "prime/topology/detail/wait.hpp"
+
+namespace prime::shm::detail {
+
+// The publishing side of a topic: its one live publisher. A publisher that
+// finds the previous one dead takes the topic over where it stopped.
+//
+// Not thread-safe: one thread at a time loans and publishes.
+class Writer {
+ public:
+  // `report` hears of each subscriber a `block` publisher stops waiting for.
+  Writer(std::shared_ptr<Topic> topic, std::chrono::nanoseconds block_timeout, std::function<void(Error)> report)
+      : topic_{std::move(topic)}, me_{topic_->registry().me()}, block_timeout_{block_timeout}, report_{std::move(report)} {
+    auto& h = topic_->header();
+    auto current = h.publisher.load();
+    while (true) {
+      if (current != 0 && topic_->registry().alive(current))
+        throw Failure{{Errc::in_use, "topic '" + topic_->name() + "' already has a publisher: " +
+                                         topic_->registry().describe(current)}};
+      if (h.publisher.compare_exchange_strong(current, me_)) break;
+    }
+    if (current != 0) recover();  // the previous publisher died: its loans and half-done publish
+    h.block_timeout_ns.store(block_timeout_.count());
+    next_ = h.head.load();
+  }
+  Writer(const Writer&) = delete;
+  Writer& operator=(const Writer&) = delete;
+  ~Writer() {
+    if (ready_ != kNoChunk) discard(ready_);
+    auto expected = me_;
+    topic_->header().publisher.compare_exchange_strong(expected, 0);
+  }
+
+  [[nodiscard]] const std::shared_ptr<Topic>& topic() const noexcept { return topic_; }
+
+  // A free chunk, held by this loan, once the ring has room for the next
+  // sequence: at once under drop_oldest; under block, when every live
+  // subscriber has taken the sample the next one overwrites. A subscriber
+  // that takes nothing for `block_timeout` is reported once and passed over
+  // from then on, like a drop_oldest reader, until it catches up.
+  std::expected<std::uint32_t, Error> loan() {
+    auto& h = topic_->header();
+    if (static_cast<Overflow>(h.overflow) == Overflow::block) wait_for_room();
+    if (ready_ != kNoChunk) return std::exchange(ready_, kNoChunk);
+    for (int pass = 0; pass < 2; ++pass) {
+      if (auto i = claim()) return *i;
+      if (topic_->reclaim_dead_subscribers() == 0) break;
+    }
+    // Subscribers keep to max_held, so this means a slot's owner broke the
+    // rule (a foreign or corrupted participant): say so rather than guess.
+    return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() + "': all " +
+                                                           std::to_string(h.chunk_count) +
+                                                           " chunks are in use; a subscriber holds more than max_held (" +
+                                                           std::to_string(h.max_held) + ")"});
+  }
+
+  // Hands a loaned chunk back unpublished.
+  void discard(std::uint32_t chunk) noexcept { topic_->chunk(chunk).holders.fetch_and(~kLoanBit); }
+
+  // Publishes the loaned `chunk` as the next sequence. Never waits.
+  void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
+    auto& h = topic_->header();
+    auto& c = topic_->chunk(chunk);
+    const auto seq = next_++;
+    c.size = size;
+    c.stamp = stamp.time_since_epoch().count();
+    c.seq.store(seq, std::memory_order_release);
+    c.holders.fetch_xor(kRingBit | kLoanBit);  // from the loan to the ring in one step
+    auto& entry = topic_->ring(seq);
+    const auto old = RingEntry::chunk(entry.load(std::memory_order_relaxed));
+    entry.store(RingEntry::pack(seq, chunk), std::memory_order_release);
+    h.head.store(seq + 1, std::memory_order_seq_cst);
+    if (old != kNoChunk) {
+      auto& dropped = topic_->chunk(old);
+      // Released by the fetch_and: a subscriber whose hold lands after it
+      // sees the chunk no longer carries that sequence.
+      dropped.seq.store(kNotPublished, std::memory_order_relaxed);
+      dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
+    }
+    wake_subscribers();
+    // Claim the next loan's chunk now, while subscribers read this one, and
+    // fetch its lines for writing: the next loan then waits on no one.
+    if (auto next = claim()) {
+      ready_ = *next;
+      __builtin_prefetch(&topic_->chunk(ready_), 1);
+      __builtin_prefetch(topic_->payload(ready_), 1);
+    }
+  }
+
+ private:
+  // A free chunk, now held by this publisher, if there is one.
+  std::optional<std::uint32_t> claim() noexcept {
+    const auto count = topic_->header().chunk_count;
+    for (std::uint64_t tried = 0; tried < count; ++tried) {
+      const auto i = static_cast<std::uint32_t>(search_++ % count);
+      std::uint64_t free = 0;
+      if (topic_->chunk(i).holders.compare_exchange_strong(free, kLoanBit)) return i;
+    }
+    return std::nullopt;
+  }
+
+  // Wakes sleeping subscribers. A ring that finds a sleeper's bit but wakes
+  // no one, again and again, means a sleeper died asleep: reclaiming dead
+  // subscribers forgets its bit, so it does not cost a system call per
+  // sample for as long as the domain lives.
+  void wake_subscribers() {
+    const auto woken = topic_->header().data.ring();
+    if (woken != 0) {
+      idle_rings_ = 0;
+      return;
+    }
+    if (++idle_rings_ < kIdleRingsBeforeCheck) return;
+    idle_rings_ = 0;
+    topic_->reclaim_dead_subscribers();
+  }
+
+  void wait_for_room() {
+    auto& h = topic_->header();
+    if (next_ < h.capacity) return;
+    const auto needed = next_ + 1 - h.capacity;  // every waited-for subscriber must have taken this
+    if (min_cursor_ >= needed) return;
+    // Capped at next_: a subscriber joining from now on starts at or after it.
+    auto room = [&] { return (min_cursor_ = std::min(slowest(), next_)) >= needed; };
+    // Asleep, wait for half a ring of room, not one slot: then the publisher
+    // and a subscriber that keeps up take turns by the half ring, not by the
+    // sample, and wake each other rarely.
+    const auto wanted = std::min(needed + h.capacity / 2, next_);
+    auto plenty = [&] { return (min_cursor_ = std::min(slowest(), next_)) >= wanted; };
+    auto next_check = Clock::now();
+    auto sleep = [&](Clock::time_point until) {
+      if (Clock::now() >= next_check) {  // a subscriber that died holds no one up
+        topic_->reclaim_dead_subscribers();
+        next_check = Clock::now() + std::chrono::milliseconds{10};
+      }
+      h.space_wanted.store(wanted, std::memory_order_seq_cst);
+      h.space.sleep_until(kPublisherSleeper, plenty, std::min(until, next_check));
+      h.space_wanted.store(~0ull, std::memory_order_relaxed);
+    };
+    const auto waited = prime::detail::spin_then_sleep(room, sleep, std::chrono::microseconds{50},
+                                                       Clock::now() + block_timeout_, std::stop_token{});
+    if (waited == prime::detail::Waited::ready) return;
+    give_up_on_laggards(needed);
+  }
+
+  // The slowest cursor among subscribers this publisher waits for: not the
+  // observer's, not those it gave up on, not those joining or gone.
+  std::uint64_t slowest() const {
+    auto& h = topic_->header();
+    auto min = ~0ull;
+    for (std::size_t i = 0; i < h.max_subscribers; ++i) {
+      const auto& slot = h.subscribers[i];
+      const auto cursor = slot.cursor.load(std::memory_order_acquire);
+      if (cursor < min && slot.lagging.load(std::memory_order_relaxed) == 0) min = cursor;
+    }
+    return min;
+  }
+
+  // Every subscriber still short of `needed` read nothing for the block
+  // timeout: reported once each, then passed over until it catches up (it
+  // then loses what is overwritten before it reads it, and its lost() says so).
+  void give_up_on_laggards(std::uint64_t needed) {
+    auto& h = topic_->header();
+    for (std::size_t i = 0; i < h.max_subscribers; ++i) {
+      auto& slot = h.subscribers[i];
+      if (slot.cursor.load() >= needed || slot.lagging.exchange(1) != 0) continue;
+      if (report_)
+        report_(Error{Errc::overflow, "topic '" + topic_->name() + "': subscriber " +
+                                          topic_->registry().describe(slot.owner.load()) + " read nothing for " +
+                                          std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(block_timeout_).count()) +
+                                          " ms; the publisher stops waiting for it until it catches up, and it loses "
+                                          "what is overwritten before it reads it"});
+    }
+    min_cursor_ = std::min(slowest(), next_);
+  }
+
+  // After a publisher died: its loans are freed, each chunk the ring names
+  // holds the ring's bit (whatever step of a publish it died in), and the
+  // topic goes on after the last sequence that reached the ring.
+  void recover() {
+    auto& h = topic_->header();
+    std::vector<bool> in_ring(h.chunk_count, false);
+    auto last = h.head.load();
+    for (std::uint64_t i = 0; i < h.capacity; ++i) {
+      const auto c = RingEntry::chunk(topic_->ring(i).load());
+      if (c >= h.chunk_count) continue;
+      in_ring[c] = true;
+      if (const auto seq = topic_->chunk(c).seq.load(); seq != kNotPublished) last = std::max(last, seq + 1);
+    }
+    for (std::uint32_t c = 0; c < h.chunk_count; ++c) {
+      auto& chunk = topic_->chunk(c);
+      if (in_ring[c]) {
+        chunk.holders.fetch_or(kRingBit);
+        chunk.holders.fetch_and(~kLoanBit);
+      } else {
+        chunk.seq.store(kNotPublished);
+        chunk.holders.fetch_and(~(kRingBit | kLoanBit));
+      }
+    }
+    h.head.store(last);
+    h.space_wanted.store(~0ull);
+    h.space.forget(kPublisherSleeper);  // it may have died asleep, waiting for room
+  }
+
+  std::shared_ptr<Topic> topic_;
+  ParticipantId me_;
+  std::chrono::nanoseconds block_timeout_;
+  std::function<void(Error)> report_;
+  std::uint64_t next_ = 0;
+  std::uint64_t search_ = 0;
+  std::uint32_t ready_ = kNoChunk;  // claimed ahead for the next loan
+  std::uint64_t min_cursor_ = 0;    // the slowest subscriber's cursor when last looked at
+  int idle_rings_ = 0;              // rings in a row that found a sleeper's bit but woke no one
+};
+
+}  // namespace prime::shm::detail

@@ -1,0 +1,51 @@
+#pragma once
+
+#include <chrono>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "prime/shm/detail/layout.hpp"
+#include "prime/shm/detail/segment.hpp"
+
+namespace prime::test {
+
+// A topic's shared memory, mapped by the test to look at what the processes
+// using it do (who sleeps, where cursors stand): observable conditions to
+// wait for, instead of sleeping and hoping.
+class MappedTopic {
+ public:
+  MappedTopic(const std::string& domain, const std::string& topic)
+      : segment_{shm::detail::Segment::open_existing(shm::detail::segment_name(domain, "topic", topic))} {
+    if (!segment_) throw std::runtime_error{"no topic '" + topic + "' in domain '" + domain + "'"};
+  }
+
+  [[nodiscard]] shm::detail::TopicHeader& header() const {
+    return *std::launder(reinterpret_cast<shm::detail::TopicHeader*>(segment_->data()));
+  }
+
+  // Whether someone sleeps on the topic's data doorbell (a subscriber with
+  // nothing to read) within `timeout`.
+  bool a_subscriber_sleeps(std::chrono::milliseconds timeout = std::chrono::seconds{10}) const {
+    return within(timeout, [&] { return header().data.sleepers.load() != 0; });
+  }
+  // Whether the publisher sleeps waiting for room within `timeout`.
+  bool the_publisher_sleeps(std::chrono::milliseconds timeout = std::chrono::seconds{10}) const {
+    return within(timeout, [&] { return header().space.sleepers.load() != 0; });
+  }
+
+  template <class Condition>
+  static bool within(std::chrono::milliseconds timeout, Condition condition) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (!condition()) {
+      if (std::chrono::steady_clock::now() > deadline) return false;
+      std::this_thread::yield();
+    }
+    return true;
+  }
+
+ private:
+  std::optional<shm::detail::Segment> segment_;
+};
+
+}  // namespace prime::test

@@ -1,0 +1,167 @@
+// Peers that die asleep, stop reading, or hold what they read, in other
+// processes: none may cost the publisher more than it costs itself.
+//
+// Two tests compare the publisher's cost with and without the fault in one
+// run (best of several batches, so a noisy machine blurs both alike); the
+// proof each relies on is a count that cannot be noisy (system calls, lost
+// samples, failed loans).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <string>
+
+#include "prime/shm.hpp"
+#include "shm/domain.hpp"
+#include "shm/mapped_topic.hpp"
+#include "shm/peer_process.hpp"
+
+namespace prime::test {
+namespace {
+
+using namespace std::chrono_literals;
+
+struct Cost {
+  double ns_per_message;    // the best batch's
+  std::uint64_t futex_calls;  // over every batch
+};
+
+// Runs `step` (one message) in `batches` batches of `size`.
+template <class Step>
+Cost measure(Step step, int batches = 5, int size = 20000) {
+  Cost cost{1e300, 0};
+  const auto calls = shm::detail::futex_syscalls.load();
+  for (int b = 0; b < batches; ++b) {
+    const auto start = Clock::now();
+    for (int i = 0; i < size; ++i) step();
+    const std::chrono::duration<double, std::nano> took = Clock::now() - start;
+    cost.ns_per_message = std::min(cost.ns_per_message, took.count() / size);
+  }
+  cost.futex_calls = shm::detail::futex_syscalls.load() - calls;
+  return cost;
+}
+
+TEST(ShmPeerFaults, ASubscriberKilledAsleepCostsLaterPublishesNothing) {
+  const auto domain = unique_domain("dead-sleeper");
+  shm::Core core{domain};
+  auto publisher = core.publisher<std::uint64_t>("tick");
+  std::uint64_t n = 0;
+  auto publish = [&] { ASSERT_TRUE(publisher.publish(n++)); };
+  const auto before = measure(publish);
+  EXPECT_EQ(before.futex_calls, 0u);
+
+  PeerProcess sleeper{{"sleep", domain, "tick"}};
+  ASSERT_TRUE(sleeper.says("subscribed"));
+  ASSERT_TRUE((MappedTopic{domain, "tick"}.a_subscriber_sleeps()));
+  sleeper.kill9();
+
+  const auto after = measure(publish);
+  EXPECT_LT(after.futex_calls, 100u) << "100,000 publishes after the sleeper died";
+  EXPECT_LE(after.ns_per_message, 1.2 * before.ns_per_message)
+      << before.ns_per_message << " ns per message before, " << after.ns_per_message << " after";
+}
+
+TEST(ShmPeerFaults, ABlockPublisherKilledAsleepCostsItsSuccessorNothing) {
+  const auto domain = unique_domain("dead-waiter");
+  shm::Core core{domain};
+  const shm::TopicQos qos{.capacity = 4, .overflow = Overflow::block, .block_timeout = 1h};
+  // The same work on a topic no one died on, for comparison.
+  auto fresh_publisher = core.publisher<std::uint64_t>("fresh", qos);
+  auto fresh = core.subscribe<std::uint64_t>("fresh", {}, qos).subscribe();
+  std::uint64_t n = 0;
+  const auto before = measure([&] {
+    ASSERT_TRUE(fresh_publisher.publish(n++));
+    ASSERT_TRUE(fresh.try_read());
+  });
+
+  auto reader = core.subscribe<std::uint64_t>("cmds", {}, qos).subscribe();
+  {
+    PeerProcess filler{{"fill", domain, "cmds", "4"}};
+    ASSERT_TRUE(filler.says("publishing"));
+    ASSERT_TRUE((MappedTopic{domain, "cmds"}.the_publisher_sleeps())) << "the ring is full: it waits for room";
+    filler.kill9();
+  }
+  auto successor = core.publisher<std::uint64_t>("cmds", qos);
+  while (reader.try_read()) {
+  }
+  const auto after = measure([&] {
+    ASSERT_TRUE(successor.publish(n++));
+    ASSERT_TRUE(reader.try_read());
+  });
+  EXPECT_LT(after.futex_calls, 100u) << "100,000 messages after the publisher died asleep";
+  EXPECT_LE(after.ns_per_message, 1.2 * before.ns_per_message)
+      << before.ns_per_message << " ns per message before, " << after.ns_per_message << " after";
+}
+
+TEST(ShmPeerFaults, AStuckSubscriberIsReportedOnceAndNoLongerWaitedFor) {
+  constexpr std::uint64_t kPhase = 100000;
+  const auto domain = unique_domain("stuck");
+  shm::Core core{domain};
+  const shm::TopicQos qos{.capacity = 64, .overflow = Overflow::block, .block_timeout = 200ms};
+  auto publisher = core.publisher<std::uint64_t>("cmds", qos);
+  auto errors = core.errors().subscribe();
+  PeerProcess healthy{{"count", domain, "cmds", "64", std::to_string(3 * kPhase)}};
+  ASSERT_TRUE(healthy.says("subscribed"));
+  std::uint64_t n = 0;
+  // Messages per second over the best of its batches of 10,000, publishing
+  // `count` in all or for at most `limit`.
+  auto rate = [&](std::uint64_t count, std::chrono::seconds limit) {
+    double best = 0;
+    const auto give_up = Clock::now() + limit;
+    for (std::uint64_t done = 0; done < count && Clock::now() < give_up;) {
+      const auto start = Clock::now();
+      std::uint64_t batch = 0;
+      for (; batch < 10000 && done < count; ++batch, ++done) EXPECT_TRUE(publisher.publish(n++));
+      best = std::max(best, batch / std::chrono::duration<double>(Clock::now() - start).count());
+    }
+    return best;
+  };
+  const auto alone = rate(kPhase, 60s);
+
+  PeerProcess stuck{{"stuck", domain, "cmds", "64"}};
+  ASSERT_TRUE(stuck.says("subscribed"));
+  std::optional<Error> report;  // the publisher gives up waiting for it once, after its block timeout
+  for (const auto give_up = Clock::now() + 10s; !report && Clock::now() < give_up;) {
+    EXPECT_TRUE(publisher.publish(n++));
+    if (auto said = errors.try_read()) report = said->value;
+  }
+  ASSERT_TRUE(report) << "the stuck subscriber was reported";
+  EXPECT_EQ(report->code, Errc::overflow);
+  EXPECT_NE(report->message.find("topic 'cmds': subscriber participant 'peer-stuck' (pid " +
+                                 std::to_string(stuck.pid()) + ") read nothing for 200 ms"),
+            std::string::npos)
+      << report->message;
+  const auto beside_stuck = rate(kPhase, 20s);
+  EXPECT_GE(beside_stuck, 0.5 * alone) << alone << " messages/s alone, " << beside_stuck << " beside a stuck subscriber";
+  while (n < 3 * kPhase) EXPECT_TRUE(publisher.publish(n++));
+  EXPECT_FALSE(errors.try_read()) << "reported once, not on every loan";
+  EXPECT_TRUE(healthy.says("ok wrong=0 lost=0", 60s)) << "the healthy subscriber got every message in order";
+}
+
+TEST(ShmPeerFaults, ASyncInAnotherProcessKeepsToMaxHeldWhileThePublisherRunsTenSeconds) {
+  const auto domain = unique_domain("sync-budget");
+  shm::Core core{domain};
+  const shm::TopicQos qos{.capacity = 16, .max_held = 4};  // the sync's depth is 32, its output buffer 64
+  auto lidar = core.publisher<std::uint64_t>("sync/lidar", qos);
+  auto odom = core.publisher<std::uint64_t>("sync/odom", qos);
+  PeerProcess consumer{{"sync", domain, "12"}};
+  ASSERT_TRUE(consumer.says("subscribed"));
+  std::uint64_t failed = 0, i = 0;
+  const auto t0 = Clock::now();
+  for (const auto end = t0 + 10s; Clock::now() < end; ++i) {
+    const auto stamp = t0 + std::chrono::microseconds{i};
+    failed += lidar.publish(i, stamp) ? 0 : 1;
+    failed += odom.publish(i, stamp) ? 0 : 1;
+  }
+  EXPECT_EQ(failed, 0u) << "of " << 2 * i << " loans: the other process held more than its max_held";
+  const auto result = consumer.line_starting("matched=", 30s);
+  ASSERT_TRUE(result);
+  EXPECT_NE(result->find(" wrong=0 "), std::string::npos) << *result;
+  EXPECT_EQ(result->find("matched=0 "), std::string::npos) << "the sync matched sets: " << *result;
+  EXPECT_EQ(result->find("polled=0"), std::string::npos) << "the collector saw sets: " << *result;
+  EXPECT_EQ(consumer.exit_code(), 0);
+}
+
+}  // namespace
+}  // namespace prime::test

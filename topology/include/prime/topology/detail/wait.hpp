@@ -1,0 +1,50 @@
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <stop_token>
+
+#include "prime/logic/sample.hpp"
+
+namespace prime::detail {
+
+// Tells the core this thread is busy-waiting: frees the sibling hyperthread
+// and eases the memory system's look at the watched line.
+inline void cpu_relax() noexcept {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#elif defined(__aarch64__)
+  asm volatile("yield");
+#endif
+}
+
+enum class Waited { ready, timeout, stopped };
+
+// How every medium waits: polls `ready()` for `spin` (a value due within
+// microseconds then costs no wake-up call), then sleeps by calling
+// `sleep(until)` — which returns when woken, at `until`, or for no reason —
+// and looks again, until `ready()`, `deadline` or a stop request. `sleep`
+// must not sleep through a stop request (ring the sleeper from a
+// stop_callback, or use a stop-aware wait).
+template <class Ready, class Sleep>
+Waited spin_then_sleep(Ready&& ready, Sleep&& sleep, std::chrono::nanoseconds spin, Clock::time_point deadline,
+                       const std::stop_token& stop) {
+  if (ready()) return Waited::ready;
+  if (spin > std::chrono::nanoseconds::zero()) {
+    const auto until = std::min(deadline, Clock::now() + spin);
+    do {
+      for (int i = 0; i < 64; ++i) {  // a clock read costs more than a look
+        if (ready()) return Waited::ready;
+        cpu_relax();
+      }
+    } while (Clock::now() < until && !stop.stop_requested());
+  }
+  while (true) {
+    if (ready()) return Waited::ready;
+    if (stop.stop_requested()) return Waited::stopped;
+    if (Clock::now() >= deadline) return Waited::timeout;
+    sleep(deadline);
+  }
+}
+
+}  // namespace prime::detail
