@@ -99,7 +99,6 @@ TEST(ErrorTest, DescribeNamesTheCodeAndTheMessage) {
   EXPECT_EQ(f.error().code, Errc::timeout);
 }
 
-TEST(TokenTest, TokensAreInterchangeable) { EXPECT_EQ(Token{}, Token{}); }
 
 }  // namespace
 }  // namespace prime::test

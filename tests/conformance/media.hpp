@@ -40,11 +40,15 @@ struct Harness {
   }
 };
 
-// What a medium can do, for the few tests that depend on it. A harness that
-// says nothing has the in-process answers; one that differs defines
+// What a medium really carries, for the tests that depend on it. A harness
+// that says nothing has the in-process answers; one that differs defines
 //   static constexpr bool kPassesObjectsInPlace = false;      // values (and a block's exceptions) are
 //                                                            // serialised: not copy-counted, not rethrown as their type
 //   static constexpr bool kRunsLinkedBlocksInOneWorker = false;  // each linked block runs in a worker of its own
+//   static constexpr bool kCarriesAnyType = false;           // sources carry only some types (Shm: trivially
+//                                                            // copyable messages), so copy-counted objects stay out
+//   static constexpr const char* kChainsAreAnotherMediums = "why";  // its core's chains are another medium's code
+//                                                            // (tested there): the chain suite skips it, saying why
 template <class M>
 constexpr bool passes_objects_in_place() {
   if constexpr (requires { Harness<M>::kPassesObjectsInPlace; }) return Harness<M>::kPassesObjectsInPlace;
@@ -54,6 +58,16 @@ template <class M>
 constexpr bool runs_linked_blocks_in_one_worker() {
   if constexpr (requires { Harness<M>::kRunsLinkedBlocksInOneWorker; }) return Harness<M>::kRunsLinkedBlocksInOneWorker;
   return true;
+}
+template <class M>
+constexpr bool carries_any_type() {
+  if constexpr (requires { Harness<M>::kCarriesAnyType; }) return Harness<M>::kCarriesAnyType;
+  return true;
+}
+template <class M>
+constexpr const char* chains_are_another_mediums() {
+  if constexpr (requires { Harness<M>::kChainsAreAnotherMediums; }) return Harness<M>::kChainsAreAnotherMediums;
+  return nullptr;
 }
 
 template <class M>

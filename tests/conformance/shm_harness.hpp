@@ -1,8 +1,11 @@
 #pragma once
 
 // How the conformance suite runs on Shm: every core joins a domain of its
-// own, and a feed is a topic with a publisher and a subscription in this
-// process (the cross-process behaviour has tests of its own in tests/shm).
+// own; a feed is a topic with a publisher and a subscription in this
+// process, and core.source(event) is a topic too, so every source test goes
+// through shared memory (the cross-process behaviour has tests of its own
+// in tests/shm). An Shm core's own chains are Liberty's erased chains, run
+// in its process: the chain suite says so and skips it.
 
 #include <unistd.h>
 
@@ -16,6 +19,10 @@ namespace prime::test {
 
 template <>
 struct Harness<shm::Core> {
+  static constexpr bool kCarriesAnyType = false;
+  static constexpr const char* kChainsAreAnotherMediums =
+      "an shm::Core's own chains are Liberty's erased chains, run in its process (tested on Liberty)";
+
   static std::unique_ptr<shm::Core> make_core() {
     static std::atomic<int> made = 0;
     return std::make_unique<shm::Core>("conformance-" + std::to_string(::getpid()) + "-" + std::to_string(made++));

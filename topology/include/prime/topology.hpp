@@ -2,6 +2,7 @@
 
 // The topology layer: what chains and sources are, and the combinators that
 // work the same over every medium.
+#include "prime/topology/chain_factory.hpp"
 #include "prime/topology/collector.hpp"
 #include "prime/topology/concepts.hpp"
 #include "prime/topology/erased_chain.hpp"

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -41,6 +42,14 @@ constexpr std::string_view to_string(Errc code) noexcept {
     case Errc::not_found: return "not found";
   }
   return "unknown";
+}
+
+// The Errc whose value is `value`, if there is one: for codes read off a
+// wire, so a code added here is accepted there without another edit.
+constexpr std::optional<Errc> errc_from(int value) noexcept {
+  const auto code = static_cast<Errc>(value);
+  if (value < 0 || to_string(code) == "unknown") return std::nullopt;
+  return code;
 }
 
 struct Error {

@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "prime/topology/chain_factory.hpp"
 #include "prime/topology/concepts.hpp"
 #include "prime/topology/graph.hpp"
 #include "prime/topology/link.hpp"
@@ -122,9 +123,10 @@ template <class In, class Mid, class Out>
 
 // A core whose chains are erased chains of its medium: Liberty's, and the
 // local chains of media that carry sources between processes.
-class ErasedChainRuntime : public Runtime {
+class ErasedChainRuntime : public Runtime, public ChainFactory<ErasedChainRuntime> {
  public:
   using Runtime::Runtime;
+  using ChainFactory<ErasedChainRuntime>::chain;
 
   // A chain of one block (or of a chain of another medium, adopted whole).
   template <class In = detail::Deduce, class F>
@@ -134,19 +136,6 @@ class ErasedChainRuntime : public Runtime {
     using Out = block_output_t<F, I>;
     return ErasedChain<I, Out>{std::make_shared<const detail::erased::BlockStep<I, Out, F>>(std::move(block)),
                                std::move(graph)};
-  }
-  template <class In = detail::Deduce, class F>
-  [[nodiscard]] auto chain(F block, std::string name) {
-    return chain<In>(std::move(block), Graph::node(std::move(name), "chain", std::string{medium()}));
-  }
-  template <class In = detail::Deduce, class F>
-  [[nodiscard]] auto chain(F block) {
-    if constexpr (Chain<F>) {
-      Graph graph = block.graph();
-      return chain<In>(std::move(block), std::move(graph));
-    } else {
-      return chain<In>(std::move(block), std::string{"chain"});
-    }
   }
 };
 

@@ -22,6 +22,7 @@
 #include "prime/optimus/detail/stream_writer.hpp"
 #include "prime/optimus/options.hpp"
 #include "prime/optimus/source.hpp"
+#include "prime/topology/chain_factory.hpp"
 #include "prime/topology/concepts.hpp"
 #include "prime/topology/graph.hpp"
 #include "prime/topology/link.hpp"
@@ -40,7 +41,7 @@ namespace prime::optimus {
 //   auto scans = core.subscribe<Scan>("lidar/scan");               // a source published anywhere
 //
 // Thread-safe. Destroying the core stops and joins its services' workers.
-class Core : public Runtime {
+class Core : public Runtime, public ChainFactory<Core> {
  public:
   // Connects once to check the server: throws Errc::unreachable naming the URL.
   explicit Core(std::string url) : Core{Options{.url = std::move(url)}} {}
@@ -55,6 +56,7 @@ class Core : public Runtime {
   Core(const Core&) = delete;
   Core& operator=(const Core&) = delete;
   ~Core() { stop(); }  // workers use what the members hold: stop them first
+  using ChainFactory<Core>::chain;
 
   // Stops and joins every worker of this core (its services, linked
   // sources). Chain calls waiting meanwhile end with Errc::stopped: a worker
@@ -86,20 +88,6 @@ class Core : public Runtime {
     return Chain<I, O>{{detail::Segment{pool_, {detail::service_key(*pool_, name)}, {std::move(shown)}}},
                        std::move(graph), options_.call_timeout};
   }
-  template <class In = prime::detail::Deduce, class F>
-  [[nodiscard]] auto chain(F block, std::string name) {
-    return chain<In>(std::move(block), Graph::node(std::move(name), "chain", "optimus"));
-  }
-  template <class In = prime::detail::Deduce, class F>
-  [[nodiscard]] auto chain(F block) {
-    if constexpr (prime::Chain<F>) {
-      Graph graph = block.graph();
-      return chain<In>(std::move(block), std::move(graph));
-    } else {
-      return chain<In>(std::move(block), std::string{"chain"});
-    }
-  }
-
   // Hosts `block` (or a chain of any medium) as the service `name`, for any
   // process of the domain to call, and returns a chain that calls it. Several
   // processes may serve one name with the same types (they share the work);

@@ -11,6 +11,7 @@
 
 #include "prime/common/fingerprint.hpp"
 #include "prime/logic/error.hpp"
+#include "prime/logic/event.hpp"
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/registry.hpp"
 #include "prime/shm/detail/topic.hpp"
@@ -108,6 +109,37 @@ class Core : public ErasedChainRuntime {
     auto topic = open<T>(name, topic_qos, "subscriber");
     if (qos.history > topic->header().capacity) qos.history = topic->header().capacity;
     return Subscription<T>{std::move(topic), qos, runtime(), Graph::node(name, "source", "shm")};
+  }
+
+  // A source of what `event` raises from now on, carried by the domain's
+  // topic `name`: each emit is published into it (a failed publish goes to
+  // errors()), so other processes of the domain see it too. `qos` gives
+  // the topic's capacity, overflow and block timeout, and the readers' spin.
+  // The event may be destroyed before or after the source.
+  template <class T>
+  [[nodiscard]] Subscription<T> source(Event<T>& event, std::string name = "source", Qos qos = {}) {
+    static_assert(Message<T>,
+                  "prime::shm: a source is a topic of the domain, so it carries trivially copyable messages "
+                  "(bounded_string and bounded_vector for variable content); keep other types in a liberty::Core");
+    validate(qos, name);
+    const TopicQos topic{.capacity = qos.capacity, .overflow = qos.overflow, .block_timeout = qos.block_timeout};
+    struct Feed {
+      explicit Feed(Publisher<T> p) : publisher{std::move(p)} {}
+      std::mutex mutex;  // events may be raised on several threads; a publisher takes one at a time
+      Publisher<T> publisher;
+      Connection connection;
+    };
+    auto feed = std::make_shared<Feed>(publisher<T>(name, topic));
+    feed->connection = event.connect([weak = std::weak_ptr<Feed>{feed}, runtime = runtime()](Sample<T>&& s) {
+      auto feed = weak.lock();
+      if (!feed) return;
+      std::scoped_lock lock{feed->mutex};
+      if (auto sent = feed->publisher.publish(s.value, s.stamp); !sent)
+        if (auto r = runtime.lock()) r->report(std::move(sent.error()));
+    });
+    auto topic_handle = open<T>(name, topic, "source");
+    return Subscription<T>{std::move(topic_handle), {.spin = qos.spin}, runtime(), Graph::node(name, "source", "shm"),
+                           std::move(feed)};
   }
 
   // The domain's participants and topics as they are now.

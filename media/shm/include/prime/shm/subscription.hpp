@@ -33,11 +33,15 @@ namespace prime::shm {
 template <Message T>
 class SubscriptionReader final : public Reader<View<T>>::Impl {
  public:
+  // `feed`: what publishes into the topic for a source made from an event,
+  // kept while anyone reads it.
   SubscriptionReader(std::shared_ptr<detail::Topic> topic, SubscribeQos qos,
-                     std::weak_ptr<prime::detail::RuntimeState> runtime, bool observer = false)
+                     std::weak_ptr<prime::detail::RuntimeState> runtime, bool observer = false,
+                     std::shared_ptr<const void> feed = {})
       : subscriber_{std::make_shared<detail::Subscriber>(std::move(topic), qos.history, observer)},
         spin_{qos.spin},
-        runtime_{std::move(runtime)} {}
+        runtime_{std::move(runtime)},
+        feed_{std::move(feed)} {}
 
   std::optional<Sample<View<T>>> try_read() override {
     if (subscriber_->at_budget()) {
@@ -142,6 +146,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   std::shared_ptr<detail::Subscriber> subscriber_;
   std::chrono::microseconds spin_;
   std::weak_ptr<prime::detail::RuntimeState> runtime_;
+  std::shared_ptr<const void> feed_;
   bool budget_reported_ = false;
 };
 
@@ -155,12 +160,25 @@ class Subscription {
  public:
   using value_type = View<T>;
 
+  // `feed`: what publishes into the topic, for a source made from an event
+  // (Core::source); it lasts while the subscription or any reader does.
   Subscription(std::shared_ptr<detail::Topic> topic, SubscribeQos qos, std::weak_ptr<prime::detail::RuntimeState> runtime,
-               Graph graph)
-      : state_{std::make_shared<const State>(State{std::move(topic), qos, std::move(runtime), std::move(graph)})} {}
+               Graph graph, std::shared_ptr<const void> feed = {})
+      : state_{std::make_shared<const State>(
+            State{std::move(topic), qos, std::move(runtime), std::move(graph), std::move(feed)})} {}
 
   [[nodiscard]] Reader<View<T>> subscribe() const {
-    return Reader<View<T>>{std::make_unique<SubscriptionReader<T>>(state_->topic, state_->qos, state_->runtime)};
+    return Reader<View<T>>{
+        std::make_unique<SubscriptionReader<T>>(state_->topic, state_->qos, state_->runtime, false, state_->feed)};
+  }
+  // A reader with its own spin. A reader reads the topic's ring, so its
+  // capacity and overflow are the topic's; a capacity of 0 is refused as
+  // everywhere.
+  [[nodiscard]] Reader<View<T>> subscribe(const Qos& qos) const {
+    validate(qos, name());
+    auto own = state_->qos;
+    own.spin = qos.spin;
+    return Reader<View<T>>{std::make_unique<SubscriptionReader<T>>(state_->topic, own, state_->runtime, false, state_->feed)};
   }
 
   [[nodiscard]] const std::string& name() const noexcept { return state_->topic->name(); }
@@ -182,6 +200,7 @@ class Subscription {
     SubscribeQos qos;
     std::weak_ptr<prime::detail::RuntimeState> runtime;
     Graph graph;
+    std::shared_ptr<const void> feed;
   };
   std::shared_ptr<const State> state_;
 };

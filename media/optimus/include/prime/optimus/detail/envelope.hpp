@@ -113,8 +113,12 @@ inline std::expected<Response, std::string> decode_response(std::string_view dat
     Response r;
     r.id = f[0].as<std::uint64_t>();
     const int code = f[1].as<int>();
-    if (code < 0 || code > static_cast<int>(Errc::not_found) + 1) return std::unexpected(std::string{"an unknown status"});
-    if (code > 0) r.error = static_cast<Errc>(code - 1);
+    if (code > 0) {
+      r.error = errc_from(code - 1);
+      if (!r.error) return std::unexpected(std::string{"an unknown status"});
+    } else if (code < 0) {
+      return std::unexpected(std::string{"an unknown status"});
+    }
     r.message = std::string{bytes_of(f[2])};
     r.payload = std::string{bytes_of(f[3])};
     return r;

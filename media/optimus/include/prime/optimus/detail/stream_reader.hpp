@@ -42,8 +42,7 @@ class StreamReader final : public Reader<T>::Impl {
  public:
   StreamReader(std::shared_ptr<StreamState> state, const Qos& qos)
       : state_{std::move(state)}, qos_{qos}, block_{qos.overflow == Overflow::block} {
-    if (qos_.capacity == 0)
-      throw Failure{{Errc::limit_exceeded, "source '" + state_->name() + "': capacity must be at least 1"}};
+    validate(qos_, state_->name());
     reader_id_ = state_->pool().process_id() + "." + std::to_string(state_->pool().next_id());
     reader_field_ = reader_field(reader_id_);
     lost_field_ = lost_field(reader_id_);

@@ -46,8 +46,7 @@ class StreamState {
         qos_{qos},
         runtime_{std::move(runtime)},
         maxlen_{std::to_string(stream_length(qos))} {
-    if (qos_.capacity == 0)
-      throw Failure{{Errc::limit_exceeded, "source '" + name_ + "': capacity must be at least 1"}};
+    validate(qos_, name_);
   }
 
   // How many entries the stream keeps. drop_oldest: the capacity. block: as
