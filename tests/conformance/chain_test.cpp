@@ -16,7 +16,9 @@ int twice(int x) { return 2 * x; }
 struct AddOne {
   int operator()(int x) const { return x + 1; }
 };
-std::string show(const int& x) { return std::to_string(x); }
+// Text that every medium carries, shared memory too.
+using Text = bounded_string<16>;
+Text show(const int& x) { return Text{std::to_string(x)}; }
 
 template <class M>
 class ChainTest : public MediumTest<M> {
@@ -25,28 +27,26 @@ class ChainTest : public MediumTest<M> {
     if constexpr (chains_are_another_mediums<M>() != nullptr) GTEST_SKIP() << chains_are_another_mediums<M>();
   }
 };
+// Chains come from this->chain(...): the medium's own (on Shm, a service).
 TYPED_TEST_SUITE(ChainTest, Media, MediumName);
 
 TYPED_TEST(ChainTest, FunctionLambdaAndFunctorAreBlocks) {
-  auto& core = *this->core;
-  EXPECT_EQ(core.chain(twice)(4), 8);
-  EXPECT_EQ(core.chain([](double x) { return x / 2; })(3.0), 1.5);
-  EXPECT_EQ(core.chain(AddOne{})(1), 2);
-  EXPECT_EQ(core.template chain<int>([](auto x) { return x * 10; })(3), 30);  // generic: input named
+  EXPECT_EQ(this->chain(twice)(4), 8);
+  EXPECT_EQ(this->chain([](double x) { return x / 2; })(3.0), 1.5);
+  EXPECT_EQ(this->chain(AddOne{})(1), 2);
+  EXPECT_EQ(this->template chain<int>([](auto x) { return x * 10; })(3), 30);  // generic: input named
 }
 
 TYPED_TEST(ChainTest, LinkedChainsRunInOrderAndChangeType) {
-  auto& core = *this->core;
-  auto pipeline = core.chain(twice) | core.chain(AddOne{}) | core.chain(show);
+  auto pipeline = this->chain(twice) | this->chain(AddOne{}) | this->chain(show);
   static_assert(std::same_as<typename decltype(pipeline)::input_type, int>);
-  static_assert(std::same_as<typename decltype(pipeline)::output_type, std::string>);
+  static_assert(std::same_as<typename decltype(pipeline)::output_type, Text>);
   EXPECT_EQ(pipeline(5), "11");
 }
 
 TYPED_TEST(ChainTest, LinkedChainsAreOfTheMediumsOwnKind) {
-  auto& core = *this->core;
-  using One = decltype(core.chain(twice));
-  using Two = decltype(core.chain(twice) | core.chain(twice));
+  using One = decltype(this->chain(twice));
+  using Two = decltype(this->chain(twice) | this->chain(twice));
   static_assert(!std::same_as<Two, Linked<One, One>>, "a medium links its own chains, not the generic link");
   if constexpr (std::same_as<TypeParam, liberty::Core>) static_assert(std::same_as<One, Two>, "liberty: linking keeps the erased type");
   SUCCEED();
@@ -54,14 +54,13 @@ TYPED_TEST(ChainTest, LinkedChainsAreOfTheMediumsOwnKind) {
 
 TYPED_TEST(ChainTest, ChainsOfDifferentMediaLinkThroughTheGenericLink) {
   liberty::Core other;
-  auto mixed = this->core->chain(twice) | other.chain(AddOne{}) | this->core->chain(twice);
+  auto mixed = this->chain(twice) | other.chain(AddOne{}) | this->chain(twice);
   EXPECT_EQ(mixed(3), 14);
   EXPECT_NE(mixed.graph().text().find("liberty"), std::string::npos);
 }
 
 TYPED_TEST(ChainTest, ExceptionFromABlockReachesTheCaller) {
-  auto& core = *this->core;
-  auto failing = core.chain(twice) | core.chain([](int x) -> int {
+  auto failing = this->chain(twice) | this->chain([](int x) -> int {
                    if (x > 10) throw std::domain_error{"too far"};
                    return x;
                  });
@@ -76,36 +75,36 @@ TYPED_TEST(ChainTest, ExceptionFromABlockReachesTheCaller) {
 
 TYPED_TEST(ChainTest, IfThenElseRunsOneOfTwoChains) {
   auto& core = *this->core;
-  auto guarded = if_then_else(core, [](const int& x) { return x >= 0; }, core.chain(twice),
-                              core.chain([](int x) { return -x * 100; }));
+  auto guarded = if_then_else(core, [](const int& x) { return x >= 0; }, this->chain(twice),
+                              this->chain([](int x) { return -x * 100; }));
   EXPECT_EQ(guarded(4), 8);
   EXPECT_EQ(guarded(-2), 200);
 }
 
 TYPED_TEST(ChainTest, ForeachMapsAChainOverEveryElement) {
   auto& core = *this->core;
-  auto each = foreach(core, core.chain(twice) | core.chain(show));
-  EXPECT_EQ(each({1, 2, 3}), (std::vector<std::string>{"2", "4", "6"}));
+  auto each = foreach(core, this->chain(twice) | this->chain(show));
+  EXPECT_EQ(each({1, 2, 3}), (std::vector<Text>{Text{"2"}, Text{"4"}, Text{"6"}}));
   EXPECT_TRUE(each({}).empty());
 }
 
 TYPED_TEST(ChainTest, RepeatIteratesUntilTheCondition) {
   auto& core = *this->core;
-  auto grow = repeat(core, core.chain(twice), [](const int& x) { return x > 100; });
+  auto grow = repeat(core, this->chain(twice), [](const int& x) { return x > 100; });
   EXPECT_EQ(grow(1), 128);
   EXPECT_EQ(grow(1000), 2000) << "the body runs at least once";
 }
 
 TYPED_TEST(ChainTest, RepeatThatNeverEndsIsAnErrorNotAHang) {
   auto& core = *this->core;
-  auto stuck = repeat(core, core.chain([](int x) { return x; }), [](const int&) { return false; },
+  auto stuck = repeat(core, this->chain([](int x) { return x; }), [](const int&) { return false; },
                       RepeatLimits{.max_iterations = 1000});
   EXPECT_TRUE(fails_with([&] { (void)stuck(1); }, Errc::limit_exceeded, "1000 iterations"));
 }
 
 TYPED_TEST(ChainTest, ForkTeesEveryOutputIntoASource) {
   auto& core = *this->core;
-  auto [teed, outputs] = fork(core, core.chain(twice), "doubled");
+  auto [teed, outputs] = fork(core, this->chain(twice), "doubled");
   auto watcher = outputs.subscribe();
   EXPECT_EQ(teed(1), 2);
   EXPECT_EQ(teed(5), 10);
@@ -119,12 +118,11 @@ TYPED_TEST(ChainTest, ChainsMoveTheirMessageWithoutCopying) {
   if constexpr (!passes_objects_in_place<TypeParam>()) {
     GTEST_SKIP() << "this medium serialises messages: there are no copies of the object to count";
   } else {
-    auto& core = *this->core;
     auto step = [](Lifetime m) {
       ++m.value;
       return m;
     };
-    auto one = core.chain(step);
+    auto one = this->chain(step);
     auto ten = one | one | one | one | one | one | one | one | one | one;
     Lifetime::reset();
     EXPECT_EQ(ten(Lifetime{0}).value, 10);
@@ -134,24 +132,24 @@ TYPED_TEST(ChainTest, ChainsMoveTheirMessageWithoutCopying) {
 
 TYPED_TEST(ChainTest, DescribesItselfAsTextAndDot) {
   auto& core = *this->core;
-  auto pipeline = core.chain(twice, "localize") | core.chain(AddOne{}, "plan") | core.chain(show, "control");
-  const auto medium = std::string{core.medium()};
-  EXPECT_EQ(pipeline.graph().text(), "localize [chain, " + medium + "] -> plan [chain, " + medium +
-                                         "]\nplan [chain, " + medium + "] -> control [chain, " + medium + "]\n");
+  auto pipeline = this->chain(twice, "localize") | this->chain(AddOne{}, "plan") | this->chain(show, "control");
+  const auto kind = std::string{chain_kind<TypeParam>()} + ", " + std::string{core.medium()};
+  EXPECT_EQ(pipeline.graph().text(), "localize [" + kind + "] -> plan [" + kind + "]\nplan [" + kind + "] -> control [" +
+                                         kind + "]\n");
   const auto dot = pipeline.graph().dot();
   EXPECT_EQ(dot.rfind("digraph prime {", 0), 0u);
   EXPECT_EQ(std::ranges::count(dot, '>'), 2) << dot;
-  EXPECT_NE(dot.find("label=\"plan\\nchain, " + medium + "\""), std::string::npos) << dot;
+  EXPECT_NE(dot.find("label=\"plan\\n" + kind + "\""), std::string::npos) << dot;
 }
 
 TYPED_TEST(ChainTest, CombinatorsAppearInTheDescription) {
   auto& core = *this->core;
-  auto guarded = if_then_else(core, [](const int& x) { return x > 0; }, core.chain(twice, "go"),
-                              core.chain(twice, "stop"), "blocked?");
+  auto guarded = if_then_else(core, [](const int& x) { return x > 0; }, this->chain(twice, "go"),
+                              this->chain(twice, "stop"), "blocked?");
   const auto text = guarded.graph().text();
   EXPECT_NE(text.find("blocked? [branch"), std::string::npos) << text;
-  EXPECT_NE(text.find("-> go [chain"), std::string::npos) << text;
-  EXPECT_NE(text.find("-> stop [chain"), std::string::npos) << text;
+  EXPECT_NE(text.find("-> go [" + std::string{chain_kind<TypeParam>()}), std::string::npos) << text;
+  EXPECT_NE(text.find("-> stop [" + std::string{chain_kind<TypeParam>()}), std::string::npos) << text;
 }
 
 }  // namespace

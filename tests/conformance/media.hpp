@@ -49,6 +49,7 @@ struct Harness {
 //                                                            // copyable messages), so copy-counted objects stay out
 //   static constexpr const char* kChainsAreAnotherMediums = "why";  // its core's chains are another medium's code
 //                                                            // (tested there): the chain suite skips it, saying why
+//   static constexpr const char* kChainKind = "service";     // what its chains' graph nodes are
 template <class M>
 constexpr bool passes_objects_in_place() {
   if constexpr (requires { Harness<M>::kPassesObjectsInPlace; }) return Harness<M>::kPassesObjectsInPlace;
@@ -65,6 +66,11 @@ constexpr bool carries_any_type() {
   return true;
 }
 template <class M>
+constexpr const char* chain_kind() {
+  if constexpr (requires { Harness<M>::kChainKind; }) return Harness<M>::kChainKind;
+  return "chain";
+}
+template <class M>
 constexpr const char* chains_are_another_mediums() {
   if constexpr (requires { Harness<M>::kChainsAreAnotherMediums; }) return Harness<M>::kChainsAreAnotherMediums;
   return nullptr;
@@ -77,6 +83,15 @@ class MediumTest : public ::testing::Test {
   template <class T>
   auto feed(std::string name, Qos qos = {}) {
     return Harness<M>::template feed<T>(*core, std::move(name), qos);
+  }
+  // A chain of `block`, carried by the medium (on Shm: a service).
+  // (A harness may define `chain<In>(core, block, name)`; by default it is the core's.)
+  template <class In = detail::Deduce, int&... ExplicitArgumentBarrier, class F>
+  auto chain(F block, std::string name = "chain") {
+    if constexpr (requires { Harness<M>::template chain<In>(*core, std::move(block), std::move(name)); })
+      return Harness<M>::template chain<In>(*core, std::move(block), std::move(name));
+    else
+      return core->template chain<In>(std::move(block), std::move(name));
   }
   std::unique_ptr<M> core = Harness<M>::make_core();
 };

@@ -1,10 +1,10 @@
 // Peers that die asleep, stop reading, or hold what they read, in other
 // processes: none may cost the publisher more than it costs itself.
 //
-// Two tests compare the publisher's cost with and without the fault in one
-// run (best of several batches, so a noisy machine blurs both alike); the
-// proof each relies on is a count that cannot be noisy (system calls, lost
-// samples, failed loans).
+// Three tests compare the publisher's speed with and without the fault in
+// one run (best of several batches, taken in turn, so a noisy machine blurs
+// both alike); the proof each relies on is a count that cannot be noisy
+// (system calls, lost samples, failed loans).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -22,59 +22,58 @@ namespace {
 
 using namespace std::chrono_literals;
 
-struct Cost {
-  double ns_per_message;    // the best batch's
-  std::uint64_t futex_calls;  // over every batch
+// The publisher's best time per message over batches of two kinds taken in
+// turn, so that a noisy machine slows both alike.
+struct Costs {
+  double a_ns = 1e300, b_ns = 1e300;
 };
-
-// Runs `step` (one message) in `batches` batches of `size`.
-template <class Step>
-Cost measure(Step step, int batches = 5, int size = 20000) {
-  Cost cost{1e300, 0};
-  const auto calls = shm::detail::futex_syscalls.load();
-  for (int b = 0; b < batches; ++b) {
+template <class A, class B>
+Costs compare(A a, B b, int batches = 7, int size = 20000) {
+  Costs costs;
+  auto time = [&](auto& step) {
     const auto start = Clock::now();
     for (int i = 0; i < size; ++i) step();
-    const std::chrono::duration<double, std::nano> took = Clock::now() - start;
-    cost.ns_per_message = std::min(cost.ns_per_message, took.count() / size);
+    return std::chrono::duration<double, std::nano>(Clock::now() - start).count() / size;
+  };
+  for (int k = 0; k < batches; ++k) {
+    costs.a_ns = std::min(costs.a_ns, time(a));
+    costs.b_ns = std::min(costs.b_ns, time(b));
   }
-  cost.futex_calls = shm::detail::futex_syscalls.load() - calls;
-  return cost;
+  return costs;
 }
+
+// Timing under a sanitizer says little; there the counts alone prove it.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr bool kTimingMeansSomething = false;
+#else
+constexpr bool kTimingMeansSomething = true;
+#endif
 
 TEST(ShmPeerFaults, ASubscriberKilledAsleepCostsLaterPublishesNothing) {
   const auto domain = unique_domain("dead-sleeper");
   shm::Core core{domain};
   auto publisher = core.publisher<std::uint64_t>("tick");
-  std::uint64_t n = 0;
-  auto publish = [&] { ASSERT_TRUE(publisher.publish(n++)); };
-  const auto before = measure(publish);
-  EXPECT_EQ(before.futex_calls, 0u);
-
+  auto untouched = core.publisher<std::uint64_t>("quiet");  // no one ever slept on it: the baseline
   PeerProcess sleeper{{"sleep", domain, "tick"}};
   ASSERT_TRUE(sleeper.says("subscribed"));
   ASSERT_TRUE((MappedTopic{domain, "tick"}.a_subscriber_sleeps()));
   sleeper.kill9();
 
-  const auto after = measure(publish);
-  EXPECT_LT(after.futex_calls, 100u) << "100,000 publishes after the sleeper died";
-  EXPECT_LE(after.ns_per_message, 1.2 * before.ns_per_message)
-      << before.ns_per_message << " ns per message before, " << after.ns_per_message << " after";
+  std::uint64_t n = 0;
+  const auto calls = shm::detail::futex_syscalls.load();
+  for (int i = 0; i < 100000; ++i) ASSERT_TRUE(publisher.publish(n++));
+  EXPECT_LT(shm::detail::futex_syscalls.load() - calls, 100u) << "system calls in 100,000 publishes after the sleeper died";
+
+  const auto costs = compare([&] { (void)publisher.publish(n++); }, [&] { (void)untouched.publish(n++); });
+  if (kTimingMeansSomething)
+    EXPECT_LE(costs.a_ns, 1.2 * costs.b_ns) << costs.a_ns << " ns per message where a sleeper died, " << costs.b_ns
+                                            << " where none ever slept";
 }
 
 TEST(ShmPeerFaults, ABlockPublisherKilledAsleepCostsItsSuccessorNothing) {
   const auto domain = unique_domain("dead-waiter");
   shm::Core core{domain};
   const shm::TopicQos qos{.capacity = 4, .overflow = Overflow::block, .block_timeout = 1h};
-  // The same work on a topic no one died on, for comparison.
-  auto fresh_publisher = core.publisher<std::uint64_t>("fresh", qos);
-  auto fresh = core.subscribe<std::uint64_t>("fresh", {}, qos).subscribe();
-  std::uint64_t n = 0;
-  const auto before = measure([&] {
-    ASSERT_TRUE(fresh_publisher.publish(n++));
-    ASSERT_TRUE(fresh.try_read());
-  });
-
   auto reader = core.subscribe<std::uint64_t>("cmds", {}, qos).subscribe();
   {
     PeerProcess filler{{"fill", domain, "cmds", "4"}};
@@ -85,13 +84,30 @@ TEST(ShmPeerFaults, ABlockPublisherKilledAsleepCostsItsSuccessorNothing) {
   auto successor = core.publisher<std::uint64_t>("cmds", qos);
   while (reader.try_read()) {
   }
-  const auto after = measure([&] {
+  // The same work on a topic no one died on, for comparison.
+  auto fresh_publisher = core.publisher<std::uint64_t>("fresh", qos);
+  auto fresh = core.subscribe<std::uint64_t>("fresh", {}, qos).subscribe();
+
+  std::uint64_t n = 0;
+  const auto calls = shm::detail::futex_syscalls.load();
+  for (int i = 0; i < 100000; ++i) {
     ASSERT_TRUE(successor.publish(n++));
     ASSERT_TRUE(reader.try_read());
-  });
-  EXPECT_LT(after.futex_calls, 100u) << "100,000 messages after the publisher died asleep";
-  EXPECT_LE(after.ns_per_message, 1.2 * before.ns_per_message)
-      << before.ns_per_message << " ns per message before, " << after.ns_per_message << " after";
+  }
+  EXPECT_LT(shm::detail::futex_syscalls.load() - calls, 100u) << "system calls in 100,000 messages after the publisher died asleep";
+
+  const auto costs = compare(
+      [&] {
+        (void)successor.publish(n++);
+        (void)reader.try_read();
+      },
+      [&] {
+        (void)fresh_publisher.publish(n++);
+        (void)fresh.try_read();
+      });
+  if (kTimingMeansSomething)
+    EXPECT_LE(costs.a_ns, 1.2 * costs.b_ns) << costs.a_ns << " ns per message after the death, " << costs.b_ns
+                                            << " on a topic no one died on";
 }
 
 TEST(ShmPeerFaults, AStuckSubscriberIsReportedOnceAndNoLongerWaitedFor) {

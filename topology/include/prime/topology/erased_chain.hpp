@@ -129,7 +129,7 @@ class ErasedChainRuntime : public Runtime, public ChainFactory<ErasedChainRuntim
   using ChainFactory<ErasedChainRuntime>::chain;
 
   // A chain of one block (or of a chain of another medium, adopted whole).
-  template <class In = detail::Deduce, class F>
+  template <class In = detail::Deduce, int&... ExplicitArgumentBarrier, class F>
   [[nodiscard]] auto chain(F block, Graph graph) {
     using I = chain_input_t<In, F>;
     static_assert(Block<F, I>, "prime: a block must be callable as Out(In) and return a value");

@@ -14,8 +14,35 @@
 
 #include <msgpack.hpp>
 
+#include "prime/common/bounded_string.hpp"
 #include "prime/common/fingerprint.hpp"
 #include "prime/logic/error.hpp"
+
+// MessagePack knows bounded_string as text, so it travels inside other
+// messages (a std::vector of them, say) as a std::string would.
+namespace msgpack {
+MSGPACK_API_VERSION_NAMESPACE(MSGPACK_DEFAULT_API_NS) {
+namespace adaptor {
+template <std::size_t N>
+struct pack<prime::bounded_string<N>> {
+  template <class Stream>
+  packer<Stream>& operator()(packer<Stream>& out, const prime::bounded_string<N>& text) const {
+    out.pack_str(static_cast<std::uint32_t>(text.size()));
+    out.pack_str_body(text.view().data(), static_cast<std::uint32_t>(text.size()));
+    return out;
+  }
+};
+template <std::size_t N>
+struct convert<prime::bounded_string<N>> {
+  const msgpack::object& operator()(const msgpack::object& o, prime::bounded_string<N>& text) const {
+    if (o.type != msgpack::type::STR) throw msgpack::type_error();
+    text.assign(std::string_view{o.via.str.ptr, o.via.str.size});  // throws when it does not fit
+    return o;
+  }
+};
+}  // namespace adaptor
+}  // MSGPACK_API_VERSION_NAMESPACE(MSGPACK_DEFAULT_API_NS)
+}  // namespace msgpack
 
 namespace prime::optimus {
 

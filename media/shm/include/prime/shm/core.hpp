@@ -2,7 +2,9 @@
 
 #include <cstddef>
 #include <fstream>
+#include <functional>
 #include <map>
+#include <span>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -14,11 +16,14 @@
 #include "prime/logic/event.hpp"
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/registry.hpp"
+#include "prime/shm/detail/server.hpp"
+#include "prime/shm/detail/service.hpp"
 #include "prime/shm/detail/topic.hpp"
 #include "prime/shm/message.hpp"
 #include "prime/shm/publisher.hpp"
 #include "prime/shm/qos.hpp"
 #include "prime/shm/registry.hpp"
+#include "prime/shm/service.hpp"
 #include "prime/shm/subscription.hpp"
 #include "prime/topology/concepts.hpp"
 #include "prime/topology/erased_chain.hpp"
@@ -42,6 +47,27 @@ inline TopicQos complete(const std::string& name, const Fingerprint& type, bool 
     refuse("max_message_size " + std::to_string(qos.max_message_size) + " is smaller than " + type.describe());
   const TopicGeometry geometry{qos.capacity, qos.max_message_size, qos.max_subscribers, qos.max_held};
   if (geometry.chunk_count() >= kNoChunk) refuse("capacity and subscribers need more than 2^24 slots");
+  return qos;
+}
+
+// `qos` with its defaults filled in for a service of `request` and `reply`,
+// or a Failure naming the service and what is wrong.
+inline ServiceQos complete(const std::string& name, const Fingerprint& request, bool raw_request, const Fingerprint& reply,
+                           bool raw_reply, ServiceQos qos) {
+  auto refuse = [&](const std::string& why) { throw Failure{{Errc::limit_exceeded, "service '" + name + "': " + why}}; };
+  if (raw_request && qos.max_request_size == 0) refuse("raw byte requests need max_request_size");
+  if (raw_reply && qos.max_reply_size == 0) refuse("raw byte replies need max_reply_size");
+  if (qos.max_request_size == 0) qos.max_request_size = request.size;
+  if (qos.max_reply_size == 0) qos.max_reply_size = reply.size;
+  if (qos.max_request_size < request.size) refuse("max_request_size is smaller than " + request.describe());
+  if (qos.max_reply_size < reply.size) refuse("max_reply_size is smaller than " + reply.describe());
+  if (qos.workers == 0 || qos.workers > kMaxWorkers)
+    refuse("workers must be in [1, " + std::to_string(kMaxWorkers) + "], not " + std::to_string(qos.workers));
+  if (qos.max_clients == 0 || qos.max_clients > kMaxServiceClients)
+    refuse("max_clients must be in [1, " + std::to_string(kMaxServiceClients) + "], not " + std::to_string(qos.max_clients));
+  if (qos.calls_per_client == 0 || qos.max_clients * qos.calls_per_client > kMaxCells)
+    refuse("max_clients × calls_per_client must be in [1, " + std::to_string(kMaxCells) + "]");
+  if (qos.timeout <= std::chrono::milliseconds::zero()) refuse("the timeout must be positive");
   return qos;
 }
 
@@ -88,6 +114,7 @@ class Core : public ErasedChainRuntime {
     reclaim();
   }
   ~Core() { stop(); }
+  using ErasedChainRuntime::chain;  // this process's own chains, beside the service handles below
 
   // The publisher of topic `name`, creating the topic with `qos` if needed.
   // Throws Failure when the topic carries another type
@@ -142,7 +169,68 @@ class Core : public ErasedChainRuntime {
                            std::move(feed)};
   }
 
-  // The domain's participants and topics as they are now.
+  // Hosts `block` — any callable or chain, of any medium — as the service
+  // `name` of the domain, run by qos.workers workers of this core, until it
+  // stops. A block that takes `const In&` reads each request in place, where
+  // the caller wrote it; its result is made in place in the caller's cell
+  // (or, in a linked call, in the next service's). Requests and replies are
+  // trivially copyable messages; a block taking std::span<const std::byte>
+  // (or giving std::vector<std::byte>) serves raw bytes. What the block
+  // throws comes back to its caller, and the service serves on. Throws
+  // Errc::in_use when a live server serves the name; takes over one that
+  // died. Returns a chain that calls it.
+  template <class In = prime::detail::Deduce, int&... ExplicitArgumentBarrier, class F>
+  auto serve(const std::string& name, F block, ServiceQos qos = {}) {
+    using I = chain_input_t<In, F>;
+    using Request = detail::wire_t<I>;
+    using Argument = std::conditional_t<std::is_same_v<Request, Bytes>, std::span<const std::byte>, const Request&>;
+    static_assert(std::is_invocable_v<const F&, Argument>, "prime::shm: a service block must be callable with its request");
+    using Reply = detail::wire_t<std::invoke_result_t<const F&, Argument>>;
+    static_assert(Message<Request> && Message<Reply>,
+                  "prime::shm: a service carries trivially copyable messages (or raw bytes) both ways");
+    const detail::ServiceSpec spec{Fingerprint::of<Request>(), Fingerprint::of<Reply>(),
+                                   detail::complete(name, Fingerprint::of<Request>(), std::is_same_v<Request, Bytes>,
+                                                    Fingerprint::of<Reply>(), std::is_same_v<Reply, Bytes>, qos)};
+    auto handler = [block = std::move(block)](const std::byte* request, std::size_t size, std::byte* out,
+                                              std::size_t capacity) -> std::size_t {
+      auto argument = [&]() -> Argument {
+        if constexpr (std::is_same_v<Request, Bytes>) return {request, size};
+        else return *std::launder(reinterpret_cast<const Request*>(request));
+      };
+      if constexpr (std::is_same_v<Reply, Bytes>) {
+        const auto reply = std::invoke(block, argument());
+        if (reply.size() > capacity)
+          throw Failure{{Errc::limit_exceeded, "a reply of " + std::to_string(reply.size()) +
+                                                   " bytes exceeds max_reply_size (" + std::to_string(capacity) + " bytes)"}};
+        if (!reply.empty()) std::memcpy(out, reply.data(), reply.size());
+        return reply.size();
+      } else {
+        ::new (out) Reply(std::invoke(block, argument()));  // made where the caller reads it
+        return sizeof(Reply);
+      }
+    };
+    auto service = detail::Service::open_to_serve(registry_, name, spec);
+    auto server = std::make_shared<detail::Server>(std::move(service), spec.qos, std::move(handler),
+                                                   [runtime = runtime()](Error e) {
+                                                     if (auto r = runtime.lock()) r->report(std::move(e));
+                                                   });
+    auto owner = runtime().lock();
+    for (std::size_t w = 0; w < spec.qos.workers; ++w)
+      owner->spawn([server, w](std::stop_token stop) { server->work(w, stop); });
+    return chain<Request, Reply>(name);
+  }
+
+  // A chain that calls the service `name`, served by this process or any
+  // other of the domain (now, or later: it binds on its first call). Link
+  // two of them with `|` and the first one's output goes straight to the
+  // second. See ServiceChain for how a call fails.
+  template <Message In, Message Out>
+  [[nodiscard]] ServiceChain<In, Out> chain(const std::string& name, ClientQos qos = {}) {
+    auto binding = std::make_shared<detail::Binding>(registry_, name, Fingerprint::of<In>(), Fingerprint::of<Out>(), qos);
+    return {{std::move(binding)}, Graph::node(name, "service", "shm")};
+  }
+
+  // The domain's participants, topics and services as they are now.
   [[nodiscard]] RegistrySnapshot registry() {
     RegistrySnapshot s;
     s.participants = registry_->participants();
@@ -160,18 +248,36 @@ class Core : public ErasedChainRuntime {
           t.subscriber_pids.push_back(registry_->pid_of(owner));
       s.topics.push_back(std::move(t));
     }
+    for (const auto& name : registry_->names(detail::EndpointKind::service)) {
+      auto service = detail::Service::open_existing(registry_, name);
+      if (!service) continue;
+      auto& h = service->header();
+      RegistrySnapshot::Service v{name, h.request_type.describe(), h.reply_type.describe(), service->qos(), 0, {}, {},
+                                  h.served.load(), h.failed.load()};
+      if (const auto server = h.server.load(); registry_->alive(server)) {
+        v.server_pid = registry_->pid_of(server);
+        v.server = registry_->name_of(server);
+      }
+      for (std::size_t c = 0; c < h.max_clients; ++c)
+        if (const auto owner = h.clients[c].owner.load(); registry_->alive(owner))
+          v.client_pids.push_back(registry_->pid_of(owner));
+      s.services.push_back(std::move(v));
+    }
     return s;
   }
 
   // Reclaims what dead participants left behind: their registry entries,
-  // their subscriber slots and the samples those held. Publishers also do
-  // this when they wait, and each participant does it on joining. Returns
-  // the subscriber slots freed.
+  // their subscriber slots and the samples those held, their client slots
+  // of services and the calls those had in flight. Publishers and idle
+  // services also do this, and each participant does it on joining. Returns
+  // the subscriber and client slots freed.
   std::size_t reclaim() {
     registry_->forget_dead_participants();
     std::size_t freed = 0;
     for (const auto& name : registry_->topics())
       if (auto topic = detail::Topic::inspect(registry_, name)) freed += topic->reclaim_dead_subscribers();
+    for (const auto& name : registry_->names(detail::EndpointKind::service))
+      if (auto service = detail::Service::open_existing(registry_, name)) freed += service->reclaim_dead_clients();
     return freed;
   }
 

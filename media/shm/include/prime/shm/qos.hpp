@@ -46,6 +46,37 @@ struct SubscribeQos {
   std::chrono::microseconds spin{50};
 };
 
+// How a service is hosted (Core::serve) and what it allows its clients:
+// limits crossed are errors returned to the caller that name the limit and
+// the service, never a hang.
+struct ServiceQos {
+  std::size_t workers = 1;  // threads taking requests; more than one call the block concurrently (at most 62)
+  // How long a client waits for an answer when it names no timeout of its own.
+  std::chrono::milliseconds timeout{1000};
+  // Largest request and reply in bytes; 0 means sizeof the type. Raw byte
+  // services (shm::Bytes) must set them.
+  std::size_t max_request_size = 0;
+  std::size_t max_reply_size = 0;
+  std::size_t max_clients = 16;      // client handles at once, over every process
+  std::size_t calls_per_client = 4;  // calls one client may have in flight at once (its threads, its posts)
+  // The least time between two requests of one client; 0: no limit.
+  std::chrono::microseconds min_interval{0};
+  // Requests that may wait for a worker at once; 0: as many as there are
+  // calls in flight (max_clients × calls_per_client, at most 256).
+  std::size_t queue_depth = 0;
+  // How long an idle worker keeps checking before it sleeps (an idle service costs no CPU).
+  std::chrono::microseconds spin{50};
+};
+
+// How a client calls a service (Core::chain<In, Out>(name, qos)).
+struct ClientQos {
+  std::chrono::milliseconds timeout{0};  // per call; 0: the service's
+  // With no live server: fail at once (0), or wait this long for one.
+  std::chrono::milliseconds wait_for_service{0};
+  // How long a caller checks for its answer before it sleeps on it.
+  std::chrono::microseconds spin{50};
+};
+
 // How a process joins a domain.
 struct DomainOptions {
   // Who may open the domain's segments: the creating user only by default.

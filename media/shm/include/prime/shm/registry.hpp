@@ -25,8 +25,20 @@ struct RegistrySnapshot {
     std::vector<std::uint32_t> subscriber_pids;
     std::uint64_t published;  // sequences so far
   };
+  struct Service {
+    std::string name;
+    std::string request_type;  // Fingerprint::describe()
+    std::string reply_type;
+    ServiceQos qos;
+    std::uint32_t server_pid;  // 0: none alive
+    std::string server;        // its participant name; empty: none alive
+    std::vector<std::uint32_t> client_pids;
+    std::uint64_t served;  // calls answered
+    std::uint64_t failed;  // of them, with an error
+  };
   std::vector<Participant> participants;
   std::vector<Topic> topics;
+  std::vector<Service> services;
 };
 
 }  // namespace prime::shm

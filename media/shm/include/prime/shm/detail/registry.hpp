@@ -22,9 +22,13 @@
 
 namespace prime::shm::detail {
 
-inline constexpr std::uint64_t kRegistryMagic = 0x5052494d45524732ull;  // "PRIMERG2"
+inline constexpr std::uint64_t kRegistryMagic = 0x5052494d45524733ull;  // "PRIMERG3"
 inline constexpr std::size_t kMaxParticipants = 128;
-inline constexpr std::size_t kMaxTopics = 512;
+inline constexpr std::size_t kMaxEndpoints = 512;  // topics and services
+
+// What a registry entry names, and the kind in its segment's name.
+enum class EndpointKind : std::uint32_t { topic = 1, service = 2 };
+inline const char* kind_name(EndpointKind kind) { return kind == EndpointKind::topic ? "topic" : "service"; }
 inline constexpr std::size_t kNameCapacity = 244;
 inline constexpr int kSlotBits = 8;
 static_assert(kMaxParticipants < (1u << kSlotBits));
@@ -39,14 +43,15 @@ struct RegistryLayout {
     std::uint64_t pid_namespace = 0;
     char name[48]{};
   };
-  struct TopicEntry {
+  struct Endpoint {
     std::uint32_t used = 0;
+    EndpointKind kind = EndpointKind::topic;
     char name[kNameCapacity]{};
   };
   std::atomic<std::uint64_t> magic{0};
   std::atomic<std::uint64_t> generation{0};  // participant ids handed out so far
   Participant participants[kMaxParticipants];
-  TopicEntry topics[kMaxTopics];
+  Endpoint endpoints[kMaxEndpoints];
 };
 
 [[nodiscard]] inline std::uint64_t own_pid_namespace() {
@@ -115,32 +120,48 @@ class Registry : public std::enable_shared_from_this<Registry> {
     return p.id.load() == id ? std::string{p.name} : std::string{};
   }
 
-  // Lists `name` among the domain's topics.
-  void add_topic(const std::string& name) {
+  // Lists `name` among the domain's topics or services; returns its entry's
+  // index, which stays its own while the domain lives.
+  std::size_t add(EndpointKind kind, const std::string& name) {
+    const auto what = std::string{kind_name(kind)} + " '" + name + "'";
+    if (name.empty()) throw Failure{{Errc::limit_exceeded, "shm: a " + std::string{kind_name(kind)} + " needs a name"}};
     if (name.size() >= kNameCapacity)
-      throw Failure{{Errc::limit_exceeded, "topic '" + name + "': names are at most " +
-                                               std::to_string(kNameCapacity - 1) + " characters"}};
+      throw Failure{{Errc::limit_exceeded, what + ": names are at most " + std::to_string(kNameCapacity - 1) + " characters"}};
     Locked lock{*this};
     auto& r = layout();
-    RegistryLayout::TopicEntry* free = nullptr;
-    for (auto& t : r.topics) {
-      if (t.used && name == t.name) return;
-      if (!t.used && !free) free = &t;
+    std::size_t free = kMaxEndpoints;
+    for (std::size_t i = 0; i < kMaxEndpoints; ++i) {
+      auto& e = r.endpoints[i];
+      if (e.used && e.kind == kind && name == e.name) return i;
+      if (!e.used && free == kMaxEndpoints) free = i;
     }
-    if (!free)
+    if (free == kMaxEndpoints)
       throw Failure{{Errc::limit_exceeded, "shm domain '" + domain_ + "' has its maximum of " +
-                                               std::to_string(kMaxTopics) + " topics"}};
-    copy_name(free->name, name);
-    free->used = 1;
+                                               std::to_string(kMaxEndpoints) + " topics and services"}};
+    auto& e = r.endpoints[free];
+    e.kind = kind;
+    copy_name(e.name, name);
+    e.used = 1;
+    return free;
   }
 
-  // The names of the domain's topics.
-  [[nodiscard]] std::vector<std::string> topics() {
+  // The names of the domain's topics (or services).
+  [[nodiscard]] std::vector<std::string> names(EndpointKind kind) {
     Locked lock{*this};
     std::vector<std::string> names;
-    for (auto& t : layout().topics)
-      if (t.used) names.emplace_back(t.name);
+    for (auto& e : layout().endpoints)
+      if (e.used && e.kind == kind) names.emplace_back(e.name);
     return names;
+  }
+  [[nodiscard]] std::vector<std::string> topics() { return names(EndpointKind::topic); }
+
+  // The name of entry `index`, if it is a `kind`.
+  [[nodiscard]] std::optional<std::string> name_at(std::size_t index, EndpointKind kind) {
+    if (index >= kMaxEndpoints) return std::nullopt;
+    Locked lock{*this};
+    const auto& e = layout().endpoints[index];
+    if (!e.used || e.kind != kind) return std::nullopt;
+    return std::string{e.name};
   }
 
   // The participants, as the table lists them now.
@@ -196,7 +217,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
     const bool anyone_alive = std::any_of(std::begin(r.participants), std::end(r.participants),
                                           [this](const auto& p) { return alive(p.id.load()); });
     if (!anyone_alive) {  // an earlier run died: start the domain afresh
-      for (auto& t : r.topics) forget(t);
+      for (auto& e : r.endpoints) forget(e);
       for (auto& p : r.participants) p.id.store(0);
     }
     for (std::size_t i = 0; i < kMaxParticipants; ++i) {
@@ -225,7 +246,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
       const bool anyone_alive = std::any_of(std::begin(r.participants), std::end(r.participants),
                                             [this](const auto& p) { return alive(p.id.load()); });
       if (!anyone_alive) {
-        for (auto& t : r.topics) forget(t);
+        for (auto& e : r.endpoints) forget(e);
         r.magic.store(0);
         Segment::remove(segment_.name());
       }
@@ -256,11 +277,11 @@ class Registry : public std::enable_shared_from_this<Registry> {
   static std::size_t slot_of(ParticipantId id) { return static_cast<std::size_t>(id & ((1u << kSlotBits) - 1)) - 1; }
   static off_t lease_byte(std::size_t slot) { return static_cast<off_t>(1 + slot); }
 
-  void forget(RegistryLayout::TopicEntry& t) {
-    if (!t.used) return;
-    Segment::remove(segment_name(domain_, "topic", t.name));
-    t.used = 0;
-    t.name[0] = '\0';
+  void forget(RegistryLayout::Endpoint& e) {
+    if (!e.used) return;
+    Segment::remove(segment_name(domain_, kind_name(e.kind), e.name));
+    e.used = 0;
+    e.name[0] = '\0';
   }
 
   template <std::size_t N>

@@ -31,7 +31,7 @@ class Topic {
                                      const Fingerprint& type, const TopicQos& qos, std::uint64_t first_sequence = 0) {
     const TopicGeometry geometry{qos.capacity, qos.max_message_size, qos.max_subscribers, qos.max_held};
     const auto what = "topic '" + name + "'";
-    registry->add_topic(name);
+    registry->add(EndpointKind::topic, name);
     auto segment = Segment::open(
         segment_name(registry->domain(), "topic", name), registry->permissions(), geometry.bytes(), what,
         [&](std::byte* data, std::size_t size) { return is_set_up(name, data, size); },

@@ -1,0 +1,263 @@
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <expected>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "prime/common/fingerprint.hpp"
+#include "prime/logic/error.hpp"
+#include "prime/logic/sample.hpp"
+#include "prime/shm/detail/service.hpp"
+#include "prime/topology/detail/wait.hpp"
+
+namespace prime::shm::detail {
+
+// One client handle's hold on one service: the service's segment and a
+// client slot in it, taken when first needed and taken again when the
+// service comes back (a restarted server, or one that made its segment
+// anew). Copies of a chain handle share it; it leaves its slot when the
+// last goes.
+//
+// Thread-safe.
+class Binding {
+ public:
+  Binding(std::shared_ptr<Registry> registry, std::string name, Fingerprint request, Fingerprint reply, ClientQos qos)
+      : registry_{std::move(registry)}, name_{std::move(name)}, request_{request}, reply_{reply}, qos_{qos} {}
+  Binding(const Binding&) = delete;
+  Binding& operator=(const Binding&) = delete;
+  ~Binding() { unbind(); }
+
+  [[nodiscard]] const std::string& name() const noexcept { return name_; }
+  [[nodiscard]] const ClientQos& qos() const noexcept { return qos_; }
+  [[nodiscard]] const Fingerprint& request_type() const noexcept { return request_; }
+  [[nodiscard]] const Fingerprint& reply_type() const noexcept { return reply_; }
+
+  // The service with a live server and this client's slot in it, waiting
+  // for one up to ClientQos::wait_for_service; or why not.
+  std::expected<std::shared_ptr<Service>, Error> ready() {
+    const auto give_up = Clock::now() + qos_.wait_for_service;
+    auto pause = std::chrono::microseconds{100};
+    while (true) {
+      auto bound = bind();
+      if (bound || bound.error().code != Errc::not_found || Clock::now() >= give_up) return bound;
+      std::this_thread::sleep_for(std::min<Clock::duration>(pause, give_up - Clock::now()));
+      pause = std::min(pause * 2, std::chrono::microseconds{10000});
+    }
+  }
+
+  // Claims a cell of this client's in `service` for one call, checking the
+  // service's limits; its ticket is in the cell's status.
+  std::expected<std::size_t, Error> claim(Service& service) {
+    auto& h = service.header();
+    const auto now = Clock::now().time_since_epoch().count();
+    auto& slot = h.clients[slot_];
+    if (const auto gap = h.min_interval_ns.load(); gap > 0 && slot.last_request.load() != 0 &&
+                                                   now - slot.last_request.load() < gap)
+      return limit(service, "a client sends at most one request every " + std::to_string(gap / 1000) +
+                                " us (min_interval)");
+    if (const auto depth = h.queue_depth.load(); depth > 0 && service.queued() >= depth)
+      return limit(service, std::to_string(depth) + " requests wait for a worker already (queue_depth)");
+    const auto first = slot_ * h.calls_per_client;
+    for (std::size_t k = 0; k < h.calls_per_client; ++k) {
+      auto& status = service.cell(first + k).status;
+      auto s = status.load();
+      if (Status::state(s) != CellState::free) continue;
+      if (status.compare_exchange_strong(s, Status::pack(Status::ticket(s), CellState::claimed))) {
+        slot.last_request.store(now);
+        slot.calls.fetch_add(1);
+        return first + k;
+      }
+    }
+    return limit(service, "this client has " + std::to_string(h.calls_per_client) +
+                              " calls in flight already (calls_per_client)");
+  }
+
+ private:
+  std::expected<std::shared_ptr<Service>, Error> bind() {
+    std::scoped_lock lock{mutex_};
+    if (service_ && !live(*service_)) {
+      // Its server is gone: a new one may serve a new segment under the name.
+      if (!service_->current()) release_slot();
+    }
+    if (!service_) {
+      auto found = Service::open_existing(registry_, name_);
+      if (!found) return not_found("no service '" + name_ + "' in domain '" + registry_->domain() + "'");
+      auto& h = found->header();
+      if (!(h.request_type == request_) || !(h.reply_type == reply_))
+        return std::unexpected(Error{Errc::type_mismatch, "service '" + name_ + "' takes " + h.request_type.describe() +
+                                                              " and gives " + h.reply_type.describe() + ", not " +
+                                                              request_.describe() + " and " + reply_.describe()});
+      if (auto taken = take_slot(*found); !taken) return std::unexpected(std::move(taken.error()));
+      service_ = std::move(found);
+    }
+    const auto server = service_->header().server.load();
+    if (server == 0) return not_found("service '" + name_ + "' has no server (none started, or it stopped)");
+    if (!registry_->alive(server))
+      return not_found("service '" + name_ + "' has no live server: " + registry_->describe(server) + " died");
+    return service_;
+  }
+
+  bool live(const Service& service) const { return registry_->alive(service.header().server.load()); }
+
+  std::expected<void, Error> take_slot(Service& service) {
+    auto& h = service.header();
+    for (int pass = 0; pass < 2; ++pass) {
+      for (std::size_t c = 0; c < h.max_clients; ++c) {
+        ParticipantId free = 0;
+        if (h.clients[c].owner.compare_exchange_strong(free, registry_->me())) {
+          slot_ = c;
+          return {};
+        }
+      }
+      if (service.reclaim_dead_clients() == 0) break;
+    }
+    return std::unexpected(Error{Errc::limit_exceeded, "service '" + name_ + "' has its maximum of " +
+                                                           std::to_string(h.max_clients) + " clients (max_clients)"});
+  }
+
+  void release_slot() {
+    if (!service_) return;
+    auto& h = service_->header();
+    for (std::size_t k = 0; k < h.calls_per_client; ++k) service_->release(slot_ * h.calls_per_client + k);
+    h.clients[slot_].owner.store(0);
+    service_.reset();
+  }
+
+  void unbind() {
+    std::scoped_lock lock{mutex_};
+    release_slot();
+  }
+
+  static std::unexpected<Error> not_found(std::string message) {
+    return std::unexpected(Error{Errc::not_found, std::move(message)});
+  }
+  static std::unexpected<Error> limit(const Service& service, const std::string& what) {
+    return std::unexpected(Error{Errc::limit_exceeded, "service '" + service.name() + "': " + what});
+  }
+
+  std::shared_ptr<Registry> registry_;
+  std::string name_;
+  Fingerprint request_;
+  Fingerprint reply_;
+  ClientQos qos_;
+  std::mutex mutex_;
+  std::shared_ptr<Service> service_;
+  std::size_t slot_ = 0;
+};
+
+// Writes a request: its bytes at `to` (room for `capacity`); returns its size.
+using RequestWriter = std::function<std::size_t(std::byte* to, std::size_t capacity)>;
+
+// One call through `route` (one service, or several linked: each one's
+// output goes straight into the next one's cell, and the caller sends once
+// and waits once, for the last). `read(reply, size)` takes the answer in
+// place. `posted`: no answer is waited for.
+inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding>>& route, const RequestWriter& write,
+                                       const std::function<void(const std::byte*, std::size_t)>& read, bool posted) {
+  struct Held {
+    std::shared_ptr<Service> service;
+    std::size_t cell;
+    std::uint64_t ticket;
+  };
+  std::vector<Held> held;
+  held.reserve(route.size());
+  auto release_all = [&] {
+    for (auto& h : held) h.service->release(h.cell);
+  };
+  for (const auto& binding : route) {
+    auto service = binding->ready();
+    if (!service) {
+      release_all();
+      return std::unexpected(std::move(service.error()));
+    }
+    auto cell = binding->claim(**service);
+    if (!cell) {
+      release_all();
+      return std::unexpected(std::move(cell.error()));
+    }
+    held.push_back({*service, *cell, Status::ticket((*service)->cell(*cell).status.load())});
+  }
+
+  // The call's deadline: the client's timeout, or the longest its services allow.
+  auto timeout = std::chrono::nanoseconds{route.front()->qos().timeout};
+  if (timeout == std::chrono::nanoseconds::zero())
+    for (auto& h : held) timeout = std::max(timeout, std::chrono::nanoseconds{h.service->header().timeout_ns.load()});
+  const auto deadline = Clock::now() + timeout;
+
+  auto& first = held.front();
+  auto& c = first.service->cell(first.cell);
+  try {
+    c.request_size = write(first.service->request(first.cell), first.service->header().max_request_size);
+  } catch (const Failure& f) {
+    release_all();
+    return std::unexpected(f.error());
+  }
+  c.stamp = Clock::now().time_since_epoch().count();
+  c.posted = posted ? 1 : 0;
+  c.next_hops = static_cast<std::uint32_t>(held.size() - 1);
+  for (std::size_t k = 1; k < held.size(); ++k)
+    c.next[k - 1] = {held[k].service->index(), static_cast<std::uint32_t>(held[k].cell), held[k].ticket};
+  if (posted)  // the workers free what a post leaves; the caller lets go of the rest now
+    for (std::size_t k = 1; k < held.size(); ++k) held[k].service->cell(held[k].cell).posted = 1;
+  c.status.store(Status::pack(first.ticket, CellState::queued), std::memory_order_release);
+  first.service->header().requests_in.fetch_add(1);
+  first.service->enqueue(first.cell);
+  if (posted) return {};
+
+  // Wait for the last cell: spinning, then asleep in slices, looking after
+  // each at the servers of the route (a dead one is reported within ~50 ms).
+  auto& last = held.back();
+  auto& answer = last.service->cell(last.cell);
+  const auto done = Status::pack(last.ticket, CellState::done);
+  const auto failed = Status::pack(last.ticket, CellState::failed);
+  auto answered = [&] {
+    const auto s = answer.status.load(std::memory_order_acquire);
+    return s == done || s == failed;
+  };
+  std::optional<Error> gone;
+  auto check = [&] {
+    for (auto& h : held) {
+      const auto server = h.service->header().server.load();
+      if (server == 0)
+        gone = Error{Errc::stopped, "service '" + h.service->name() + "' stopped while this call waited"};
+      else if (!h.service->registry().alive(server))
+        gone = Error{Errc::peer_dead, "service '" + h.service->name() + "': its server, " +
+                                          h.service->registry().describe(server) + ", died while this call waited"};
+    }
+  };
+  auto over = [&] { return answered() || gone.has_value(); };
+  auto sleep = [&](Clock::time_point until) {
+    answer.answered.sleep_until(1, answered, std::min(until, Clock::now() + std::chrono::milliseconds{50}));
+    if (!answered()) check();
+  };
+  (void)prime::detail::spin_then_sleep(over, sleep, route.back()->qos().spin, deadline, std::stop_token{});
+  if (!answered()) {
+    release_all();
+    if (gone) return std::unexpected(std::move(*gone));
+    return std::unexpected(Error{Errc::timeout, "service '" + route.front()->name() + "': no answer within the call's timeout"});
+  }
+  std::expected<void, Error> result;
+  if (answer.status.load() == failed) {
+    result = std::unexpected(Error{errc_from(static_cast<int>(answer.errc)).value_or(Errc::block_failed), std::string{answer.error}});
+  } else {
+    try {
+      read(last.service->reply(last.cell), answer.reply_size);
+    } catch (const Failure& f) {
+      result = std::unexpected(f.error());
+    }
+  }
+  release_all();
+  return result;
+}
+
+}  // namespace prime::shm::detail

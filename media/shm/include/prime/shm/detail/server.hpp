@@ -1,0 +1,286 @@
+#pragma once
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <exception>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <stop_token>
+#include <string>
+
+#include "prime/logic/error.hpp"
+#include "prime/logic/sample.hpp"
+#include "prime/shm/detail/service.hpp"
+#include "prime/topology/detail/wait.hpp"
+
+namespace prime::shm::detail {
+
+// Runs the block on a request of `size` bytes at `request` and writes the
+// answer at `out`, which has room for `capacity` bytes; returns the answer's
+// size. What it throws is the call's error.
+using Handler = std::function<std::size_t(const std::byte* request, std::size_t size, std::byte* out, std::size_t capacity)>;
+
+// The one live server of a service: it takes the service over (after one
+// that died, where that one stopped) and its workers answer calls, each in
+// place in the caller's cell, or, in a linked call, in the next service's.
+//
+// Thread-safe: each worker runs `work` on a thread of its own.
+class Server {
+ public:
+  Server(std::shared_ptr<Service> service, const ServiceQos& qos, Handler handler, std::function<void(Error)> report)
+      : service_{std::move(service)}, spin_{qos.spin}, handler_{std::move(handler)}, report_{std::move(report)} {
+    auto& h = service_->header();
+    auto& registry = service_->registry();
+    auto current = h.server.load();
+    while (true) {
+      if (current != 0 && registry.alive(current))
+        throw Failure{{Errc::in_use, "service '" + service_->name() + "' is served already by " + registry.describe(current)}};
+      if (h.server.compare_exchange_strong(current, registry.me())) break;
+    }
+    h.workers.store(static_cast<std::uint32_t>(qos.workers));
+    h.queue_depth.store(qos.queue_depth);
+    h.min_interval_ns.store(std::chrono::nanoseconds{qos.min_interval}.count());
+    h.timeout_ns.store(std::chrono::nanoseconds{qos.timeout}.count());
+    h.requests.forget(~0ull);  // an earlier server's workers may have died asleep
+    recover();
+    h.incarnation.fetch_add(1);
+  }
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+  ~Server() {
+    auto& h = service_->header();
+    auto me = service_->registry().me();
+    h.server.compare_exchange_strong(me, 0);
+    for (std::size_t i = 0; i < h.cell_count; ++i) service_->cell(i).answered.ring();  // callers see it gone
+  }
+
+  [[nodiscard]] Service& service() const noexcept { return *service_; }
+
+  // One worker: takes requests until `stop`, sleeping when there are none.
+  void work(std::size_t index, const std::stop_token& stop) {
+    auto& h = service_->header();
+    std::stop_callback wake{stop, [&h] { h.requests.ring_always(); }};
+    std::size_t start = index;  // workers look at the pending bits from different places
+    while (true) {
+      auto ready = [&] {
+        for (const auto& word : h.pending)
+          if (word.load(std::memory_order_relaxed) != 0) return true;
+        return false;
+      };
+      auto next_check = Clock::now();
+      auto sleep = [&](Clock::time_point until) {
+        if (Clock::now() >= next_check) {  // idle: a good time to free what dead clients left
+          service_->reclaim_dead_clients();
+          next_check = Clock::now() + std::chrono::milliseconds{100};
+        }
+        h.requests.sleep_until(1ull << index, [&] { return ready() || stop.stop_requested(); },
+                               std::min(until, next_check));
+      };
+      if (prime::detail::spin_then_sleep(ready, sleep, spin_, Clock::time_point::max(), stop) !=
+          prime::detail::Waited::ready)
+        return;
+      if (auto cell = take(start)) serve(*cell);
+    }
+  }
+
+ private:
+  // A queued cell, now this worker's to look at, if one is still pending.
+  std::optional<std::size_t> take(std::size_t& start) {
+    auto& h = service_->header();
+    for (std::size_t n = 0; n < kPendingWords; ++n) {
+      const auto w = (start + n) % kPendingWords;
+      auto bits = h.pending[w].load(std::memory_order_acquire);
+      while (bits != 0) {
+        const auto rotate = static_cast<int>(start % 64);
+        const auto pick = (std::rotr(bits, rotate) & -std::rotr(bits, rotate));  // lowest bit from `rotate` on
+        const auto bit = std::rotl(pick, rotate);
+        if (h.pending[w].fetch_and(~bit, std::memory_order_acq_rel) & bit) {
+          ++start;
+          return w * 64 + static_cast<std::size_t>(std::countr_zero(bit));
+        }
+        bits &= ~bit;
+      }
+    }
+    return std::nullopt;
+  }
+
+  void serve(std::size_t i) {
+    auto& h = service_->header();
+    auto& c = service_->cell(i);
+    auto s = c.status.load();
+    if (Status::state(s) == CellState::abandoned) return service_->free_abandoned(i, Status::ticket(s));
+    if (Status::state(s) != CellState::queued) return;  // freed by its caller meanwhile
+    const auto ticket = Status::ticket(s);
+    if (!c.status.compare_exchange_strong(s, Status::pack(ticket, CellState::running))) return;
+
+    // Where the answer goes: this cell, or the next service's cell of a linked call.
+    Service* next = nullptr;
+    std::byte* out = service_->reply(i);
+    std::size_t capacity = h.max_reply_size;
+    if (c.next_hops > 0) {
+      next = following(c.next[0].service);
+      if (!next || !take_over(*next, c.next[0])) return finish(i, ticket, false);  // its caller gave up
+      out = next->request(c.next[0].cell);
+      capacity = next->header().max_request_size;
+    }
+
+    std::optional<Error> error;
+    std::size_t size = 0;
+    try {
+      size = handler_(service_->request(i), c.request_size, out, capacity);
+    } catch (const Failure& f) {
+      error = f.error();
+    } catch (const std::exception& e) {
+      error = Error{Errc::block_failed, e.what()};
+    } catch (...) {
+      error = Error{Errc::block_failed, "an exception of unknown type"};
+    }
+
+    if (error) {
+      h.failed.fetch_add(1);
+      error->message = "service '" + service_->name() + "': " + error->message;
+      if (c.posted && report_) report_(*error);
+      if (!next) return answer(i, ticket, &*error);
+      fail_linked(c, *next, *error);
+      return finish(i, ticket, false);
+    }
+    h.served.fetch_add(1);
+    if (!next) {
+      c.reply_size = size;
+      h.replies_out.fetch_add(1);
+      return answer(i, ticket, nullptr);
+    }
+    // Linked: the output already lies in the next service's cell; hand it on.
+    const auto hop = c.next[0];
+    auto& to = next->cell(hop.cell);
+    to.request_size = size;
+    to.stamp = c.stamp;
+    to.posted = c.posted;
+    to.next_hops = c.next_hops - 1;
+    std::copy(c.next + 1, c.next + c.next_hops, to.next);
+    auto held = Status::pack(hop.ticket, CellState::forwarding);
+    if (to.status.compare_exchange_strong(held, Status::pack(hop.ticket, CellState::queued))) {
+      h.forwarded_out.fetch_add(1);
+      next->header().forwarded_in.fetch_add(1);
+      next->enqueue(hop.cell);
+    } else {
+      next->free_abandoned(hop.cell, hop.ticket);
+    }
+    finish(i, ticket, false);
+  }
+
+  // Takes the caller's cell in the next service for writing, if the caller
+  // still waits for it.
+  static bool take_over(Service& next, const Hop& hop) {
+    auto claimed = Status::pack(hop.ticket, CellState::claimed);
+    return next.cell(hop.cell).status.compare_exchange_strong(claimed, Status::pack(hop.ticket, CellState::forwarding));
+  }
+
+  // Answers the caller in this cell: done (or failed with `error`), and
+  // wakes it; a posted call's cell is simply freed.
+  void answer(std::size_t i, std::uint64_t ticket, const Error* error) {
+    auto& c = service_->cell(i);
+    if (c.posted) return finish(i, ticket, true);
+    if (error) write_error(c, *error);
+    auto running = Status::pack(ticket, CellState::running);
+    if (c.status.compare_exchange_strong(running, Status::pack(ticket, error ? CellState::failed : CellState::done)))
+      c.answered.ring();
+    else
+      service_->free_abandoned(i, ticket);
+  }
+
+  // Ends this worker's hold of cell `i` without an answer in it: the caller
+  // frees it (or, `free`, it is freed now).
+  void finish(std::size_t i, std::uint64_t ticket, bool free) {
+    auto& c = service_->cell(i);
+    auto running = Status::pack(ticket, CellState::running);
+    const auto after = free || c.posted ? Status::pack(ticket + 1, CellState::free) : Status::pack(ticket, CellState::done);
+    if (!c.status.compare_exchange_strong(running, after)) service_->free_abandoned(i, ticket);
+  }
+
+  // A linked call failed here: the caller waits on its last cell, so the
+  // error goes there; the next cell, held for the output, goes back.
+  void fail_linked(const CellHeader& c, Service& next, const Error& error) {
+    const auto first = c.next[0];
+    const auto last = c.next[c.next_hops - 1];
+    if (c.next_hops > 1) {
+      auto held = Status::pack(first.ticket, CellState::forwarding);
+      if (!next.cell(first.cell).status.compare_exchange_strong(held, Status::pack(first.ticket, CellState::claimed)))
+        next.free_abandoned(first.cell, first.ticket);
+    }
+    Service* end = c.next_hops > 1 ? following(last.service) : &next;
+    if (!end || (c.next_hops > 1 && !take_over(*end, last))) return;
+    auto& to = end->cell(last.cell);
+    write_error(to, error);
+    auto held = Status::pack(last.ticket, CellState::forwarding);
+    if (to.posted) {
+      if (!to.status.compare_exchange_strong(held, Status::pack(last.ticket + 1, CellState::free)))
+        end->free_abandoned(last.cell, last.ticket);
+    } else if (to.status.compare_exchange_strong(held, Status::pack(last.ticket, CellState::failed))) {
+      to.answered.ring();
+    } else {
+      end->free_abandoned(last.cell, last.ticket);
+    }
+  }
+
+  static void write_error(CellHeader& c, const Error& error) {
+    c.errc = static_cast<std::uint32_t>(error.code);
+    const auto n = std::min(error.message.size(), kErrorCapacity - 1);
+    std::memcpy(c.error, error.message.data(), n);
+    c.error[n] = '\0';
+  }
+
+  // The service entry `index` of the registry names, mapped here.
+  Service* following(std::uint32_t index) {
+    std::scoped_lock lock{mutex_};
+    auto& known = next_[index];
+    if (known && known->current()) return known.get();
+    const auto name = service_->registry().name_at(index, EndpointKind::service);
+    if (!name) return nullptr;
+    known = Service::open_existing(service_->registry_handle(), *name);
+    return known.get();
+  }
+
+  // After a server that died: what it was running fails (its callers are
+  // told), what waited is queued again, what was abandoned is freed.
+  void recover() {
+    auto& h = service_->header();
+    for (std::size_t i = 0; i < h.cell_count; ++i) {
+      auto& c = service_->cell(i);
+      const auto s = c.status.load();
+      const auto ticket = Status::ticket(s);
+      switch (Status::state(s)) {
+        case CellState::running: {
+          write_error(c, {Errc::peer_dead, "service '" + service_->name() + "': its server died while running this call"});
+          auto running = s;
+          if (c.status.compare_exchange_strong(running, Status::pack(ticket, CellState::failed))) c.answered.ring();
+          break;
+        }
+        case CellState::queued:
+          h.pending[i / 64].fetch_or(1ull << (i % 64));
+          break;
+        case CellState::abandoned:
+          service_->free_abandoned(i, ticket);
+          break;
+        default:
+          break;
+      }
+    }
+  }
+
+  std::shared_ptr<Service> service_;
+  std::chrono::microseconds spin_;
+  Handler handler_;
+  std::function<void(Error)> report_;
+  std::mutex mutex_;
+  std::map<std::uint32_t, std::shared_ptr<Service>> next_;  // services this one forwards to
+};
+
+}  // namespace prime::shm::detail

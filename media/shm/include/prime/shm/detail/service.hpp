@@ -1,0 +1,214 @@
+#pragma once
+
+#include <sys/stat.h>
+
+#include <atomic>
+#include <bit>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <new>
+#include <string>
+
+#include "prime/common/fingerprint.hpp"
+#include "prime/logic/error.hpp"
+#include "prime/shm/detail/registry.hpp"
+#include "prime/shm/detail/segment.hpp"
+#include "prime/shm/detail/service_layout.hpp"
+#include "prime/shm/qos.hpp"
+
+namespace prime::shm::detail {
+
+// The types and limits a service is made with: what its segment records.
+struct ServiceSpec {
+  Fingerprint request_type;
+  Fingerprint reply_type;
+  ServiceQos qos;  // complete: sizes and depths filled in
+};
+
+// A service's segment mapped into this process: by its server, and by each
+// client. Thread-safe (shared state is atomic or fixed at creation).
+class Service {
+ public:
+  // For a server: `name` made for `spec`. A segment left for other types or
+  // limits by a server that is gone is made anew (its clients find the new
+  // one by name); one whose server lives is Errc::in_use.
+  static std::shared_ptr<Service> open_to_serve(std::shared_ptr<Registry> registry, const std::string& name,
+                                                const ServiceSpec& spec) {
+    const auto index = registry->add(EndpointKind::service, name);
+    const auto segment_name = detail::segment_name(registry->domain(), "service", name);
+    const auto what = "service '" + name + "'";
+    const ServiceGeometry geometry{spec.qos.max_request_size, spec.qos.max_reply_size, cell_count(spec.qos)};
+    while (true) {
+      auto segment = Segment::open(
+          segment_name, registry->permissions(), geometry.bytes(), what,
+          [&](std::byte* data, std::size_t size) { return is_set_up(name, data, size); },
+          [&](std::byte* data, std::size_t) { set_up(data, spec, geometry); });
+      auto service = std::shared_ptr<Service>{new Service{registry, name, index, std::move(segment)}};
+      auto& h = service->header();
+      if (registry->alive(h.server.load()))
+        throw Failure{{Errc::in_use, what + " is served already by " + registry->describe(h.server.load())}};
+      if (h.request_type == spec.request_type && h.reply_type == spec.reply_type && same_limits(h, spec.qos))
+        return service;
+      Segment::remove(segment_name);  // an earlier server's, for other types or limits: start afresh
+    }
+  }
+
+  // For a client: the service `name` as it is, or null when there is none.
+  static std::shared_ptr<Service> open_existing(std::shared_ptr<Registry> registry, const std::string& name) {
+    auto segment = Segment::open_existing(segment_name(registry->domain(), "service", name));
+    if (!segment || segment->size() < sizeof(ServiceHeader)) return nullptr;
+    const auto* h = std::launder(reinterpret_cast<const ServiceHeader*>(segment->data()));
+    if (h->magic.load(std::memory_order_acquire) != kServiceMagic || h->layout != kServiceLayout) return nullptr;
+    const auto index = registry->add(EndpointKind::service, name);
+    return std::shared_ptr<Service>{new Service{std::move(registry), name, index, std::move(*segment)}};
+  }
+
+  [[nodiscard]] const std::string& name() const noexcept { return name_; }
+  [[nodiscard]] std::uint32_t index() const noexcept { return index_; }  // its registry entry
+  [[nodiscard]] Registry& registry() const noexcept { return *registry_; }
+  [[nodiscard]] const std::shared_ptr<Registry>& registry_handle() const noexcept { return registry_; }
+  [[nodiscard]] ServiceHeader& header() const noexcept { return *header_; }
+  [[nodiscard]] CellHeader& cell(std::size_t i) const noexcept {
+    return *std::launder(reinterpret_cast<CellHeader*>(cells_ + i * header_->cell_stride));
+  }
+  [[nodiscard]] std::byte* request(std::size_t i) const noexcept {
+    return cells_ + i * header_->cell_stride + header_->request_offset;
+  }
+  [[nodiscard]] std::byte* reply(std::size_t i) const noexcept {
+    return cells_ + i * header_->cell_stride + header_->reply_offset;
+  }
+  // Whether the name still leads to this segment (a server that came back
+  // for other types made a new one).
+  [[nodiscard]] bool current() const {
+    struct stat mine {}, named {};
+    const auto path = std::string{kShmDirectory} + "/" + segment_name(registry_->domain(), "service", name_);
+    return ::fstat(segment_.fd(), &mine) == 0 && ::stat(path.c_str(), &named) == 0 && mine.st_ino == named.st_ino;
+  }
+
+  [[nodiscard]] ServiceQos qos() const noexcept {
+    const auto& h = *header_;
+    return {.workers = h.workers.load(),
+            .timeout = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::nanoseconds{h.timeout_ns.load()}),
+            .max_request_size = h.max_request_size,
+            .max_reply_size = h.max_reply_size,
+            .max_clients = h.max_clients,
+            .calls_per_client = h.calls_per_client,
+            .min_interval = std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::nanoseconds{h.min_interval_ns.load()}),
+            .queue_depth = h.queue_depth.load()};
+  }
+
+  // Requests waiting for a worker.
+  [[nodiscard]] std::size_t queued() const noexcept {
+    std::size_t n = 0;
+    for (const auto& word : header_->pending) n += static_cast<std::size_t>(std::popcount(word.load(std::memory_order_relaxed)));
+    return n;
+  }
+
+  // Queues cell `i` for a worker (its status already says queued).
+  void enqueue(std::size_t i) {
+    header_->pending[i / 64].fetch_or(1ull << (i % 64), std::memory_order_seq_cst);
+    wake_workers();
+  }
+
+  // Wakes idle workers. If the bits of sleepers stay raised while no one
+  // wakes, the server died with its workers asleep: forget them.
+  void wake_workers() {
+    if (header_->requests.ring() != 0) return;
+    if (!registry_->alive(header_->server.load())) header_->requests.forget(~0ull);
+  }
+
+  // Frees the cells and slot of every client whose participant is gone.
+  // What a live worker holds is abandoned instead: that worker frees it.
+  std::size_t reclaim_dead_clients() const {
+    std::size_t n = 0;
+    for (std::size_t c = 0; c < header_->max_clients; ++c) {
+      auto& slot = header_->clients[c];
+      auto owner = slot.owner.load();
+      if (owner == 0 || owner == kReclaiming || registry_->alive(owner)) continue;
+      if (!slot.owner.compare_exchange_strong(owner, kReclaiming)) continue;
+      for (std::size_t k = 0; k < header_->calls_per_client; ++k) release(c * header_->calls_per_client + k);
+      slot.calls.store(0);
+      slot.last_request.store(0);
+      slot.owner.store(0);
+      ++n;
+    }
+    return n;
+  }
+
+  // Lets go of cell `i` for whoever holds it: frees it, or, while a worker
+  // holds it, marks it abandoned for that worker to free.
+  void release(std::size_t i) const {
+    auto& status = cell(i).status;
+    auto s = status.load();
+    while (true) {
+      const auto state = Status::state(s);
+      const auto ticket = Status::ticket(s);
+      if (state == CellState::free || state == CellState::abandoned) return;
+      const auto next = state == CellState::running || state == CellState::forwarding
+                            ? Status::pack(ticket, CellState::abandoned)
+                            : Status::pack(ticket + 1, CellState::free);
+      if (status.compare_exchange_weak(s, next)) return;
+    }
+  }
+
+  // Frees cell `i` if it was abandoned with `ticket`.
+  void free_abandoned(std::size_t i, std::uint64_t ticket) const {
+    auto expected = Status::pack(ticket, CellState::abandoned);
+    cell(i).status.compare_exchange_strong(expected, Status::pack(ticket + 1, CellState::free));
+  }
+
+ private:
+  Service(std::shared_ptr<Registry> registry, std::string name, std::size_t index, Segment segment)
+      : registry_{std::move(registry)},
+        name_{std::move(name)},
+        index_{static_cast<std::uint32_t>(index)},
+        segment_{std::move(segment)},
+        header_{std::launder(reinterpret_cast<ServiceHeader*>(segment_.data()))},
+        cells_{segment_.data() + header_->cells_offset} {}
+
+  static std::size_t cell_count(const ServiceQos& qos) { return qos.max_clients * qos.calls_per_client; }
+
+  static bool same_limits(const ServiceHeader& h, const ServiceQos& q) {
+    return h.max_request_size == q.max_request_size && h.max_reply_size == q.max_reply_size &&
+           h.max_clients == q.max_clients && h.calls_per_client == q.calls_per_client;
+  }
+
+  static bool is_set_up(const std::string& name, std::byte* data, std::size_t size) {
+    if (size < sizeof(ServiceHeader)) return false;
+    const auto* h = std::launder(reinterpret_cast<const ServiceHeader*>(data));
+    const auto magic = h->magic.load(std::memory_order_acquire);
+    if (magic == 0) return false;
+    if (magic != kServiceMagic || h->layout != kServiceLayout)
+      throw Failure{{Errc::type_mismatch, "service '" + name + "': made by another version of Prime"}};
+    return true;
+  }
+
+  static void set_up(std::byte* data, const ServiceSpec& spec, const ServiceGeometry& geometry) {
+    auto* h = ::new (data) ServiceHeader{};
+    const auto& q = spec.qos;
+    h->request_type = spec.request_type;
+    h->reply_type = spec.reply_type;
+    h->max_request_size = q.max_request_size;
+    h->max_reply_size = q.max_reply_size;
+    h->max_clients = q.max_clients;
+    h->calls_per_client = q.calls_per_client;
+    h->cell_count = geometry.cell_count;
+    h->cell_stride = geometry.cell_stride();
+    h->request_offset = geometry.request_offset();
+    h->reply_offset = geometry.reply_offset();
+    h->cells_offset = geometry.cells_offset();
+    for (std::size_t i = 0; i < geometry.cell_count; ++i) ::new (data + h->cells_offset + i * h->cell_stride) CellHeader{};
+    h->magic.store(kServiceMagic, std::memory_order_release);
+  }
+
+  std::shared_ptr<Registry> registry_;
+  std::string name_;
+  std::uint32_t index_;
+  Segment segment_;
+  ServiceHeader* header_;
+  std::byte* cells_;
+};
+
+}  // namespace prime::shm::detail

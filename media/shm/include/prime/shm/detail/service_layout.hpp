@@ -1,0 +1,128 @@
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+
+#include "prime/common/fingerprint.hpp"
+#include "prime/shm/detail/doorbell.hpp"
+#include "prime/shm/detail/layout.hpp"
+
+namespace prime::shm::detail {
+
+// What lives in a service's shared memory: plain data and lock-free atomics
+// addressed by offsets, like a topic's.
+//
+//   ServiceHeader | cells: cell_count × (CellHeader | request | reply)
+//
+// A call lives in a cell of its caller's client slot: the caller writes the
+// request there, a worker reads it in place and writes the answer beside it,
+// the caller reads that in place. A request waits for a worker as one bit
+// of `pending`; a busy worker polls that one line, a sleeping one is rung.
+// Each cell's status word carries a ticket that changes whenever the cell
+// is freed, so an answer meant for a call that gave up never reaches a later one.
+
+inline constexpr std::uint64_t kServiceMagic = 0x5052494d45535631ull;  // "PRIMESV1"
+inline constexpr std::uint32_t kServiceLayout = 1;
+inline constexpr std::size_t kMaxCells = 256;
+inline constexpr std::size_t kPendingWords = kMaxCells / 64;
+inline constexpr std::size_t kMaxServiceClients = 128;
+inline constexpr std::size_t kMaxWorkers = 62;
+inline constexpr std::size_t kMaxHops = 8;  // services one linked call goes through
+inline constexpr std::size_t kErrorCapacity = 256;
+
+// Where a call stands. The caller claims a free cell, writes its request and
+// queues it; a worker takes it (running) and answers (done or failed) — or,
+// in a linked call, writes its output into the next service's cell, which it
+// holds meanwhile (forwarding), and queues that. A caller that stops waiting
+// frees what no worker holds and abandons what one does; that worker frees
+// it when it finishes.
+enum class CellState : std::uint8_t { free, claimed, queued, running, forwarding, done, failed, abandoned };
+
+// A cell's status: its ticket and its state, in one word so that every
+// change is one compare-and-swap against both.
+struct Status {
+  static constexpr std::uint64_t pack(std::uint64_t ticket, CellState state) noexcept {
+    return (ticket << 8) | static_cast<std::uint8_t>(state);
+  }
+  static constexpr std::uint64_t ticket(std::uint64_t status) noexcept { return status >> 8; }
+  static constexpr CellState state(std::uint64_t status) noexcept { return static_cast<CellState>(status & 0xff); }
+};
+
+// The next service a linked call goes on to: the registry entry that names
+// it, and the cell (and ticket) its caller holds there.
+struct Hop {
+  std::uint32_t service = 0;
+  std::uint32_t cell = 0;
+  std::uint64_t ticket = 0;
+};
+
+struct CellHeader {
+  alignas(64) std::atomic<std::uint64_t> status{Status::pack(0, CellState::free)};
+  std::uint64_t request_size = 0;
+  std::uint64_t reply_size = 0;
+  std::int64_t stamp = 0;       // the request's, carried to the answer
+  std::uint32_t posted = 0;     // no answer wanted: the worker frees the cell
+  std::uint32_t errc = 0;       // Errc of a failed call
+  std::uint32_t next_hops = 0;  // entries of `next` this call goes on to
+  Hop next[kMaxHops - 1];
+  char error[kErrorCapacity]{};
+  Doorbell answered;  // the caller sleeps here
+};
+
+struct alignas(64) ClientSlot {
+  std::atomic<ParticipantId> owner{0};
+  std::atomic<std::uint64_t> calls{0};
+  std::atomic<std::int64_t> last_request{0};  // steady_clock ticks
+};
+static_assert(sizeof(ClientSlot) == 64);
+
+struct ServiceHeader {
+  std::atomic<std::uint64_t> magic{0};
+  std::uint32_t layout = kServiceLayout;
+  std::atomic<std::uint32_t> workers{0};  // the current server's
+  Fingerprint request_type{};
+  Fingerprint reply_type{};
+  std::uint64_t max_request_size = 0;
+  std::uint64_t max_reply_size = 0;
+  std::uint64_t max_clients = 0;
+  std::uint64_t calls_per_client = 0;
+  // The current server's limits, which a server that takes over sets anew.
+  std::atomic<std::uint64_t> queue_depth{0};
+  std::atomic<std::int64_t> min_interval_ns{0};
+  std::atomic<std::int64_t> timeout_ns{0};
+  std::uint64_t cell_count = 0;
+  std::uint64_t cell_stride = 0;
+  std::uint64_t request_offset = 0;  // within a cell
+  std::uint64_t reply_offset = 0;
+  std::uint64_t cells_offset = 0;
+
+  alignas(64) std::atomic<ParticipantId> server{0};
+  std::atomic<std::uint64_t> incarnation{0};  // servers it has had
+  alignas(64) std::atomic<std::uint64_t> pending[kPendingWords]{};
+  Doorbell requests;  // idle workers sleep here, one bit each
+  alignas(64) std::atomic<std::uint64_t> served{0};        // calls answered
+  std::atomic<std::uint64_t> failed{0};                    // calls answered with an error
+  std::atomic<std::uint64_t> requests_in{0};               // queued by callers
+  std::atomic<std::uint64_t> forwarded_in{0};              // queued by the service before it in a linked call
+  std::atomic<std::uint64_t> replies_out{0};               // answers to callers
+  std::atomic<std::uint64_t> forwarded_out{0};             // outputs written into the next service's cell
+  ClientSlot clients[kMaxServiceClients];
+};
+static_assert(offsetof(ServiceHeader, pending) % 64 == 0 && offsetof(ServiceHeader, clients) % 64 == 0);
+
+struct ServiceGeometry {
+  std::size_t max_request_size;
+  std::size_t max_reply_size;
+  std::size_t cell_count;
+
+  [[nodiscard]] constexpr std::size_t request_offset() const { return round_up(sizeof(CellHeader), 64); }
+  [[nodiscard]] constexpr std::size_t reply_offset() const {
+    return round_up(request_offset() + max_request_size, 64);
+  }
+  [[nodiscard]] constexpr std::size_t cell_stride() const { return round_up(reply_offset() + max_reply_size, 64); }
+  [[nodiscard]] constexpr std::size_t cells_offset() const { return round_up(sizeof(ServiceHeader), 64); }
+  [[nodiscard]] constexpr std::size_t bytes() const { return cells_offset() + cell_count * cell_stride(); }
+};
+
+}  // namespace prime::shm::detail

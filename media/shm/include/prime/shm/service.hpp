@@ -1,0 +1,127 @@
+#pragma once
+
+#include <cstddef>
+#include <cstring>
+#include <expected>
+#include <memory>
+#include <new>
+#include <span>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "prime/logic/error.hpp"
+#include "prime/shm/detail/caller.hpp"
+#include "prime/shm/message.hpp"
+#include "prime/topology/concepts.hpp"
+#include "prime/topology/graph.hpp"
+#include "prime/topology/link.hpp"
+
+namespace prime::shm {
+
+namespace detail {
+
+// How a message type travels in a service's cell: the argument a chain
+// takes, the value it gives, and how each is written and read in place.
+template <class T>
+struct Wire {
+  using argument = T;
+  using value = T;
+  static std::size_t write(const T& v, std::byte* to, std::size_t) {
+    ::new (to) T(v);
+    return sizeof(T);
+  }
+  static T read(const std::byte* from, std::size_t) { return *std::launder(reinterpret_cast<const T*>(from)); }
+};
+template <>
+struct Wire<Bytes> {
+  using argument = std::span<const std::byte>;
+  using value = std::vector<std::byte>;
+  static std::size_t write(std::span<const std::byte> v, std::byte* to, std::size_t capacity) {
+    if (v.size() > capacity)
+      throw Failure{{Errc::limit_exceeded, "a request of " + std::to_string(v.size()) + " bytes exceeds max_request_size (" +
+                                               std::to_string(capacity) + " bytes)"}};
+    if (!v.empty()) std::memcpy(to, v.data(), v.size());
+    return v.size();
+  }
+  static value read(const std::byte* from, std::size_t size) { return value(from, from + size); }
+};
+
+// The message type a block's argument or result travels as.
+template <class T>
+using wire_t = std::conditional_t<std::is_same_v<std::remove_cvref_t<T>, std::span<const std::byte>> ||
+                                      std::is_same_v<std::remove_cvref_t<T>, std::vector<std::byte>>,
+                                  Bytes, std::remove_cvref_t<T>>;
+
+}  // namespace detail
+
+// A chain that calls services hosted by any process of the domain: one, or
+// several linked (`a | b`: a's output goes straight into b's input, in
+// shared memory; the caller sends once and waits once). Copies share the
+// client handle, which calls from any thread may use at once.
+//
+// A call that fails throws prime::Failure from operator(), or comes back
+// from call() as an Error: Errc::not_found (no service, or no live server),
+// type_mismatch (other types), limit_exceeded (a limit of ServiceQos, named),
+// timeout, peer_dead (the server died while the call waited), stopped (it
+// stopped), block_failed (the block threw: its message).
+template <Message In, Message Out>
+class ServiceChain {
+ public:
+  using input_type = typename detail::Wire<In>::argument;
+  using output_type = typename detail::Wire<Out>::value;
+  using Route = std::vector<std::shared_ptr<detail::Binding>>;
+
+  ServiceChain(Route route, Graph graph)
+      : route_{std::make_shared<const Route>(std::move(route))}, graph_{std::make_shared<const Graph>(std::move(graph))} {}
+
+  output_type operator()(input_type in) const {
+    auto out = call(in);
+    if (!out) throw Failure{std::move(out.error())};
+    return std::move(*out);
+  }
+
+  // The answer, or the error that kept it.
+  [[nodiscard]] std::expected<output_type, Error> call(const input_type& in) const {
+    std::optional<output_type> out;
+    auto done = detail::call(
+        *route_, [&](std::byte* to, std::size_t capacity) { return detail::Wire<In>::write(in, to, capacity); },
+        [&](const std::byte* from, std::size_t size) { out.emplace(detail::Wire<Out>::read(from, size)); }, false);
+    if (!done) return std::unexpected(std::move(done.error()));
+    return std::move(*out);
+  }
+
+  // Sends `in` and returns once it is queued, not waiting for the answer
+  // (which no one reads). Errors are those of sending: no service, a limit.
+  [[nodiscard]] std::expected<void, Error> post(const input_type& in) const {
+    return detail::call(
+        *route_, [&](std::byte* to, std::size_t capacity) { return detail::Wire<In>::write(in, to, capacity); },
+        [](const std::byte*, std::size_t) {}, true);
+  }
+
+  [[nodiscard]] const Graph& graph() const noexcept { return *graph_; }
+  [[nodiscard]] const Route& route() const noexcept { return *route_; }
+
+ private:
+  std::shared_ptr<const Route> route_;
+  std::shared_ptr<const Graph> graph_;
+};
+
+static_assert(Chain<ServiceChain<int, double>>);
+
+// Linking two service chains forwards: the first one's output is written
+// straight into the second one's cell by the first service's worker.
+template <Message A, Message B, Message C>
+[[nodiscard]] ServiceChain<A, C> link(const ServiceChain<A, B>& first, const ServiceChain<B, C>& second) {
+  auto route = first.route();
+  route.insert(route.end(), second.route().begin(), second.route().end());
+  if (route.size() > detail::kMaxHops)
+    throw Failure{{Errc::limit_exceeded, "a linked call goes through at most " + std::to_string(detail::kMaxHops) +
+                                             " services, not " + std::to_string(route.size())}};
+  return {std::move(route), Graph::sequence(first.graph(), second.graph())};
+}
+
+using prime::operator|;  // found by argument-dependent lookup for `service | service`
+
+}  // namespace prime::shm
