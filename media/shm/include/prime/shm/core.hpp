@@ -253,7 +253,8 @@ class Core : public ErasedChainRuntime {
       if (!service) continue;
       auto& h = service->header();
       RegistrySnapshot::Service v{name, h.request_type.describe(), h.reply_type.describe(), service->qos(), 0, {}, {},
-                                  h.served.load(), h.failed.load()};
+                                  h.served.load(), h.failed.load(), h.requests_in.load(), h.forwarded_in.load(),
+                                  h.replies_out.load(), h.forwarded_out.load()};
       if (const auto server = h.server.load(); registry_->alive(server)) {
         v.server_pid = registry_->pid_of(server);
         v.server = registry_->name_of(server);

@@ -34,7 +34,13 @@ struct RegistrySnapshot {
     std::string server;        // its participant name; empty: none alive
     std::vector<std::uint32_t> client_pids;
     std::uint64_t served;  // calls answered
-    std::uint64_t failed;  // of them, with an error
+    std::uint64_t failed;  // calls whose block failed
+    // Where its requests came from and its answers went: a caller, or (in
+    // a linked call) the service before or after it.
+    std::uint64_t requests_from_callers;
+    std::uint64_t requests_forwarded_in;
+    std::uint64_t replies_to_callers;
+    std::uint64_t outputs_forwarded_on;
   };
   std::vector<Participant> participants;
   std::vector<Topic> topics;

@@ -1,0 +1,327 @@
+// Shm services within one process: serving and calling, in place both ways,
+// the errors and limits a caller meets, linked services that forward, and
+// the cost of an idle service. Across processes: service_process_test.cpp.
+#include <gtest/gtest.h>
+#include <sys/resource.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <fstream>
+#include <latch>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "prime/liberty.hpp"
+#include "prime/shm.hpp"
+#include "shm/domain.hpp"
+#include "shm/mapped_topic.hpp"
+#include "support/failure.hpp"
+#include "support/threads.hpp"
+
+namespace prime::test {
+namespace {
+
+using namespace std::chrono_literals;
+
+struct Pose {
+  double x, y;
+};
+struct Path {
+  std::uint32_t steps;
+  double length;
+};
+
+Path plan(const Pose& p) { return {static_cast<std::uint32_t>(p.x + p.y), p.x * 2}; }
+
+bool inside_segment(const std::string& part, const void* p) {
+  std::ifstream maps{"/proc/self/maps"};
+  std::string line;
+  const auto at = reinterpret_cast<std::uintptr_t>(p);
+  while (std::getline(maps, line)) {
+    if (line.find("/dev/shm/") == std::string::npos || line.find(part) == std::string::npos) continue;
+    std::uintptr_t begin = 0, end = 0;
+    std::sscanf(line.c_str(), "%lx-%lx", &begin, &end);
+    if (at >= begin && at < end) return true;
+  }
+  return false;
+}
+
+std::optional<shm::RegistrySnapshot::Service> listed(shm::Core& core, const std::string& name) {
+  for (const auto& s : core.registry().services)
+    if (s.name == name) return s;
+  return std::nullopt;
+}
+
+class ServiceTest : public ::testing::Test {
+ protected:
+  shm::Core core{unique_domain("service"), {.participant = "server"}};
+};
+
+TEST_F(ServiceTest, AServedBlockIsCalledLikeAnyChainAndListedInTheRegistry) {
+  core.serve("planner", plan, {.workers = 2});
+  shm::Core client{core.domain(), {.participant = "client"}};
+  auto planner = client.chain<Pose, Path>("planner");
+  const auto path = planner({3, 4});
+  EXPECT_EQ(path.steps, 7u);
+  EXPECT_EQ(path.length, 6.0);
+  auto value = planner.call({1, 1});
+  ASSERT_TRUE(value) << value.error().describe();
+  EXPECT_EQ(value->steps, 2u);
+
+  const auto seen = listed(core, "planner");
+  ASSERT_TRUE(seen);
+  EXPECT_NE(seen->request_type.find("Pose (16 bytes"), std::string::npos) << seen->request_type;
+  EXPECT_NE(seen->reply_type.find("Path (16 bytes"), std::string::npos) << seen->reply_type;
+  EXPECT_EQ(seen->server, "server");
+  EXPECT_EQ(seen->server_pid, static_cast<std::uint32_t>(::getpid()));
+  EXPECT_EQ(seen->client_pids, std::vector<std::uint32_t>{static_cast<std::uint32_t>(::getpid())});
+  EXPECT_EQ(seen->served, 2u);
+  EXPECT_EQ(seen->qos.workers, 2u);
+}
+
+TEST_F(ServiceTest, ARequestIsReadInPlaceWhereTheCallerWroteIt) {
+  std::atomic<const void*> request_at{nullptr};
+  core.serve("in-place", [&](const Pose& p) {
+    request_at = &p;
+    return plan(p);
+  });
+  auto service = core.chain<Pose, Path>("in-place");
+  ASSERT_TRUE(service.call({1, 2}));
+  EXPECT_TRUE(inside_segment("service.in-place", request_at.load())) << "the block read the request in shared memory";
+}
+
+TEST_F(ServiceTest, AnExceptionComesBackWithItsMessageAndTheServiceServesOn) {
+  core.serve("picky", [](const Pose& p) {
+    if (p.x < 0) throw std::domain_error{"no negative x"};
+    return plan(p);
+  });
+  auto picky = core.chain<Pose, Path>("picky");
+  auto failed = picky.call({-1, 0});
+  ASSERT_FALSE(failed);
+  EXPECT_EQ(failed.error().code, Errc::block_failed);
+  EXPECT_EQ(failed.error().message, "service 'picky': no negative x");
+  EXPECT_TRUE(fails_with([&] { (void)picky({-2, 0}); }, Errc::block_failed, "no negative x")) << "operator() throws it";
+  EXPECT_EQ(picky({1, 0}).steps, 1u) << "the service serves on";
+  EXPECT_EQ(listed(core, "picky")->failed, 2u);
+}
+
+TEST_F(ServiceTest, NoServiceFailsAtOnceUnlessTheCallerWaitsForOne) {
+  auto nobody = core.chain<Pose, Path>("nobody", {.timeout = 10s});
+  const auto t0 = Clock::now();
+  auto none = nobody.call({1, 1});
+  ASSERT_FALSE(none);
+  EXPECT_EQ(none.error().code, Errc::not_found);
+  EXPECT_NE(none.error().message.find("no service 'nobody'"), std::string::npos) << none.error().message;
+  EXPECT_LT(Clock::now() - t0, 5s) << "at once, not after the 10 s timeout";
+
+  auto patient = core.chain<Pose, Path>("later", {.wait_for_service = 20s});
+  std::jthread starter{[&, waiting = ::gettid()] {
+    if (asleep_within(waiting)) core.serve("later", plan);  // once the call below waits for it
+  }};
+  auto late = patient.call({2, 2});
+  ASSERT_TRUE(late) << late.error().describe();
+  EXPECT_EQ(late->steps, 4u);
+}
+
+TEST_F(ServiceTest, CallingWithOtherTypesNamesTheServiceAndBothTypes) {
+  core.serve("planner", plan);
+  auto wrong = core.chain<int, Path>("planner").call(1);
+  ASSERT_FALSE(wrong);
+  EXPECT_EQ(wrong.error().code, Errc::type_mismatch);
+  EXPECT_NE(wrong.error().message.find("service 'planner' takes prime::test::{anonymous}::Pose"), std::string::npos)
+      << wrong.error().message;
+  EXPECT_NE(wrong.error().message.find("not int (4 bytes"), std::string::npos) << wrong.error().message;
+  EXPECT_TRUE(fails_with([&] { core.serve("planner", plan); }, Errc::in_use, "service 'planner' is served already"));
+}
+
+TEST_F(ServiceTest, AnAnswerAfterItsCallTimedOutNeverReachesALaterCall) {
+  std::latch release{1};
+  std::atomic<bool> entered{false};
+  core.serve("slow", [&](const int& x) {
+    if (x == 1) {
+      entered = true;
+      release.wait();
+    }
+    return x * 10;
+  });
+  auto slow = core.chain<int, int>("slow", {.timeout = 100ms});
+  auto timed_out = slow.call(1);
+  ASSERT_FALSE(timed_out);
+  EXPECT_EQ(timed_out.error().code, Errc::timeout);
+  EXPECT_NE(timed_out.error().message.find("service 'slow'"), std::string::npos);
+  EXPECT_TRUE(entered);
+  release.count_down();  // the worker answers call 1 now, for no one
+  for (int i = 2; i < 200; ++i) {
+    auto got = slow.call(i);
+    ASSERT_TRUE(got) << got.error().describe();
+    ASSERT_EQ(*got, i * 10) << "each call gets its own answer";
+  }
+}
+
+TEST_F(ServiceTest, LimitsAreErrorsThatNameTheLimitAndTheService) {
+  core.serve("bytes", [](std::span<const std::byte> b) { return std::vector<std::byte>(b.begin(), b.end()); },
+             {.max_request_size = 100, .max_reply_size = 100, .max_clients = 2});
+  auto bytes = core.chain<shm::Bytes, shm::Bytes>("bytes");
+  const std::vector<std::byte> hundred(100, std::byte{7}), more(101, std::byte{7});
+  EXPECT_EQ(bytes(hundred), hundred);
+  auto oversized = bytes.call(more);
+  ASSERT_FALSE(oversized);
+  EXPECT_EQ(oversized.error().code, Errc::limit_exceeded);
+  EXPECT_NE(oversized.error().message.find("exceeds max_request_size (100 bytes)"), std::string::npos)
+      << oversized.error().message;
+
+  auto second = core.chain<shm::Bytes, shm::Bytes>("bytes");
+  ASSERT_TRUE(second.call(hundred));
+  auto third = core.chain<shm::Bytes, shm::Bytes>("bytes").call(hundred);
+  ASSERT_FALSE(third);
+  EXPECT_EQ(third.error().code, Errc::limit_exceeded);
+  EXPECT_NE(third.error().message.find("service 'bytes' has its maximum of 2 clients (max_clients)"), std::string::npos)
+      << third.error().message;
+
+  core.serve("rate", [](const int& x) { return x; }, {.min_interval = 10s});
+  auto rate = core.chain<int, int>("rate");
+  ASSERT_TRUE(rate.call(1));
+  auto soon = rate.call(2);
+  ASSERT_FALSE(soon);
+  EXPECT_EQ(soon.error().code, Errc::limit_exceeded);
+  EXPECT_NE(soon.error().message.find("service 'rate': a client sends at most one request every 10000000 us (min_interval)"),
+            std::string::npos)
+      << soon.error().message;
+}
+
+TEST_F(ServiceTest, AFullQueueAndTooManyCallsInFlightAreRefusedByName) {
+  std::latch release{1};
+  std::atomic<int> running{0};
+  core.serve("busy", [&](const int& x) {
+    ++running;
+    release.wait();
+    return x;
+  }, {.calls_per_client = 2, .queue_depth = 2});
+  auto first = core.chain<int, int>("busy");
+  ASSERT_TRUE(first.post(1));
+  ASSERT_TRUE(MappedTopic::within(10s, [&] { return running == 1; })) << "the worker runs the first";
+  ASSERT_TRUE(first.post(2)) << "the second waits in the queue";
+  auto third = first.post(3);
+  ASSERT_FALSE(third);
+  EXPECT_EQ(third.error().code, Errc::limit_exceeded);
+  EXPECT_NE(third.error().message.find("service 'busy': this client has 2 calls in flight already (calls_per_client)"),
+            std::string::npos)
+      << third.error().message;
+  auto other = core.chain<int, int>("busy");
+  ASSERT_TRUE(other.post(4)) << "another client's waits in the queue too";
+  auto full = other.post(5);
+  ASSERT_FALSE(full);
+  EXPECT_NE(full.error().message.find("service 'busy': 2 requests wait for a worker already (queue_depth)"),
+            std::string::npos)
+      << full.error().message;
+  release.count_down();
+}
+
+TEST_F(ServiceTest, PostSendsWithoutWaitingForTheAnswer) {
+  std::atomic<int> sum{0};
+  core.serve("sink", [&](const int& x) {
+    sum += x;
+    return 0;
+  });
+  auto sink = core.chain<int, int>("sink");
+  for (int i = 1; i <= 100; ++i) {
+    while (true) {  // four in flight at most: a post refused for that is sent again
+      auto sent = sink.post(i);
+      if (sent) break;
+      ASSERT_NE(sent.error().message.find("calls_per_client"), std::string::npos) << sent.error().describe();
+    }
+  }
+  EXPECT_TRUE(MappedTopic::within(10s, [&] { return sum == 5050; }));
+}
+
+TEST_F(ServiceTest, LinkedServicesForwardSoTheCallerSendsOnceAndWaitsOnce) {
+  core.serve("double", [](const int& x) { return 2 * x; });
+  core.serve("describe", [](const int& x) { return bounded_string<16>{std::to_string(x)}; });
+  auto doubled = core.chain<int, int>("double");
+  auto described = core.chain<int, bounded_string<16>>("describe");
+  auto linked = doubled | described;
+  static_assert(std::same_as<decltype(linked), shm::ServiceChain<int, bounded_string<16>>>);
+  for (int i = 0; i < 100; ++i) ASSERT_EQ(linked(i), std::to_string(2 * i));
+  auto a = *listed(core, "double");
+  auto b = *listed(core, "describe");
+  EXPECT_EQ(a.requests_from_callers, 100u);
+  EXPECT_EQ(a.replies_to_callers, 0u) << "no answer went back to the caller from the first";
+  EXPECT_EQ(a.outputs_forwarded_on, 100u);
+  EXPECT_EQ(b.requests_from_callers, 0u) << "the caller never sent to the second";
+  EXPECT_EQ(b.requests_forwarded_in, 100u);
+  EXPECT_EQ(b.replies_to_callers, 100u);
+
+  for (int i = 0; i < 100; ++i) ASSERT_EQ(described(doubled(i)), std::to_string(2 * i));  // routed by the caller
+  EXPECT_EQ(listed(core, "double")->replies_to_callers, 100u);
+  EXPECT_EQ(listed(core, "describe")->requests_from_callers, 100u);
+  EXPECT_EQ(linked.graph().text(), "double [service, shm] -> describe [service, shm]\n");
+}
+
+TEST_F(ServiceTest, AFailureInsideALinkedCallReachesTheCaller) {
+  core.serve("check", [](const int& x) {
+    if (x < 0) throw std::invalid_argument{"negative"};
+    return x;
+  });
+  core.serve("plus", [](const int& x) { return x + 1; });
+  auto linked = core.chain<int, int>("check") | core.chain<int, int>("plus");
+  auto failed = linked.call(-5);
+  ASSERT_FALSE(failed);
+  EXPECT_EQ(failed.error().code, Errc::block_failed);
+  EXPECT_EQ(failed.error().message, "service 'check': negative");
+  EXPECT_EQ(linked(5), 6);
+}
+
+TEST_F(ServiceTest, ManyThreadsOnOneHandleEachGetTheirOwnAnswer) {
+  core.serve("echo", [](const std::uint64_t& x) { return x * 3; }, {.workers = 2, .calls_per_client = 8});
+  auto echo = core.chain<std::uint64_t, std::uint64_t>("echo");
+  std::atomic<int> wrong{0};
+  {
+    std::vector<std::jthread> threads;
+    for (std::uint64_t t = 0; t < 4; ++t)
+      threads.emplace_back([&, t] {
+        for (std::uint64_t i = 0; i < 5000; ++i) {
+          const auto x = t * 1'000'000 + i;
+          auto got = echo.call(x);
+          if (!got || *got != 3 * x) ++wrong;
+        }
+      });
+  }
+  EXPECT_EQ(wrong, 0);
+}
+
+TEST_F(ServiceTest, AnIdleServiceCostsNoCpu) {
+  core.serve("idle", plan, {.workers = 4});
+  ASSERT_TRUE((core.chain<Pose, Path>("idle").call({1, 1})));
+  rusage before{}, after{};
+  ::getrusage(RUSAGE_SELF, &before);
+  std::this_thread::sleep_for(1s);  // the measured second of silence
+  ::getrusage(RUSAGE_SELF, &after);
+  auto cpu = [](const rusage& r) {
+    return std::chrono::seconds{r.ru_utime.tv_sec + r.ru_stime.tv_sec} +
+           std::chrono::microseconds{r.ru_utime.tv_usec + r.ru_stime.tv_usec};
+  };
+  EXPECT_LT(cpu(after) - cpu(before), 20ms) << "four idle workers sleep";
+}
+
+TEST_F(ServiceTest, AServiceChainWorksInCombinatorsAndAfterASource) {
+  liberty::Core local;
+  core.serve("double", [](const int& x) { return 2 * x; });
+  auto doubled = core.chain<int, int>("double");
+  auto guarded = if_then_else(local, [](const int& x) { return x > 0; }, doubled, local.chain([](int x) { return -x; }));
+  EXPECT_EQ(guarded(4), 8);
+  EXPECT_EQ(guarded(-4), 4);
+  EXPECT_EQ(foreach(local, doubled)({1, 2}), (std::vector<int>{2, 4}));
+  EXPECT_EQ(repeat(local, doubled, [](const int& x) { return x > 50; })(1), 64);
+  Event<int> ticks;
+  auto outputs = core.source(ticks, "ticks") | doubled;
+  auto reader = outputs.subscribe();
+  ticks.emit(21);
+  auto got = reader.read_for(5s);
+  ASSERT_TRUE(got) << got.error().describe();
+  EXPECT_EQ(got->value, 42);
+}
+
+}  // namespace
+}  // namespace prime::test
