@@ -35,6 +35,16 @@ inline bool check(const Checked& c) {
   return sum == c.sum;
 }
 
+// A request that says who asks, and its answer: a caller can tell its own.
+struct Ask {
+  std::uint64_t who;
+  std::uint64_t n;
+};
+struct Answer {
+  std::uint64_t who;
+  std::uint64_t n;
+};
+
 // A megabyte image: a topic of these with default QoS takes 130 MiB.
 struct Image {
   std::byte pixels[1 << 20];

@@ -15,6 +15,9 @@
 //   shm_peer checksum_publish <domain> <topic> <count>           heavy overwrite of checksummed payloads
 //   shm_peer sequence_publish <domain> <topic> <count>           block: 0..count-1 as fast as possible
 //   shm_peer leave_segments <domain> <topic>                     create a topic, print, sleep (to be killed)
+//   shm_peer serve    <domain> <service> <echo|twice|plus|hang>  serve until killed (hang: answers nothing, says "running")
+//   shm_peer call_many <domain> <service> <threads> <calls>      echo: each thread's calls checked, print "ok <n>"
+//   shm_peer call_once <domain> <service> <value>                print "calling", call, print the answer
 #include <unistd.h>
 
 #include <atomic>
@@ -23,6 +26,7 @@
 #include <cstdlib>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "prime/liberty.hpp"
 #include "prime/shm.hpp"
@@ -199,6 +203,52 @@ int main(int argc, char** argv) {
     auto publisher = core.publisher<std::uint64_t>(topic);
     (void)publisher.publish(42);
     say("created");
+    forever();
+  }
+  if (role == "serve" && argc == 5) {
+    const std::string kind = argv[4];
+    if (kind == "echo")
+      (void)core.serve(topic, [](const test::Ask& a) { return test::Answer{a.who, a.n * 3}; }, {.workers = 2});
+    else if (kind == "twice")
+      (void)core.serve(topic, [](const std::int64_t& x) { return 2 * x; });
+    else if (kind == "plus")
+      (void)core.serve(topic, [](const std::int64_t& x) { return x + 1; });
+    else if (kind == "hang")
+      (void)core.serve(topic, [](const std::int64_t& x) -> std::int64_t {
+        say("running");
+        forever();
+        return x;
+      });
+    else
+      fail("unknown service kind " + kind);
+    say("serving");
+    forever();
+  }
+  if (role == "call_many" && argc == 6) {
+    auto echo = core.chain<test::Ask, test::Answer>(topic, {.timeout = 30s});
+    std::atomic<std::uint64_t> right{0}, wrong{0};
+    {
+      std::vector<std::jthread> threads;
+      for (std::uint64_t t = 0; t < arg(4); ++t)
+        threads.emplace_back([&, t] {
+          const auto who = static_cast<std::uint64_t>(::getpid()) * 100 + t;
+          for (std::uint64_t i = 0; i < arg(5); ++i) {
+            auto got = echo.call({who, i});
+            if (got && got->who == who && got->n == 3 * i)
+              ++right;
+            else
+              ++wrong;
+          }
+        });
+    }
+    say("ok " + std::to_string(right.load()) + " wrong " + std::to_string(wrong.load()));
+    return 0;
+  }
+  if (role == "call_once" && argc == 5) {
+    auto service = core.chain<std::int64_t, std::int64_t>(topic, {.timeout = 1h});
+    say("calling");
+    auto got = service.call(static_cast<std::int64_t>(arg(4)));
+    say(got ? "answer " + std::to_string(*got) : "error " + got.error().describe());
     forever();
   }
   fail("unknown role or wrong arguments: " + role);
