@@ -84,6 +84,11 @@ void throughput_payloads(benchmark::internal::Benchmark* b) {
   b->UseRealTime();
 }
 
+void round_trip_payloads(benchmark::internal::Benchmark* b) {
+  for (const auto bytes : kRoundTripPayloads) b->Arg(bytes);
+  b->UseRealTime();
+}
+
 PeerError out_of_sequence(std::uint64_t expected, std::uint64_t got) {
   return PeerError{"message " + std::to_string(expected) + " expected, " + std::to_string(got) +
                    " arrived: the stream lost or reordered a message"};

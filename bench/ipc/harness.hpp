@@ -91,6 +91,7 @@ using namespace std::chrono_literals;
 
 inline constexpr std::int64_t kLatencyPayloads[] = {64, 4 << 10, 64 << 10, 1 << 20, 4 << 20};
 inline constexpr std::int64_t kThroughputPayloads[] = {64, 1 << 20};
+inline constexpr std::int64_t kRoundTripPayloads[] = {64, 4 << 10, 64 << 10, 1 << 20};
 // Messages a throughput stream may have in flight: the depth of its queue. A
 // full queue makes the producer wait, so no message is ever lost.
 inline constexpr std::size_t kStreamDepth = 256;
@@ -98,6 +99,7 @@ inline constexpr std::size_t kStreamDepth = 256;
 // For BENCHMARK(...)->Apply(...): the payload sizes, timed by the wall clock.
 void latency_payloads(benchmark::internal::Benchmark* b);
 void throughput_payloads(benchmark::internal::Benchmark* b);
+void round_trip_payloads(benchmark::internal::Benchmark* b);
 
 // ---- failure and stopping --------------------------------------------------
 

@@ -14,6 +14,12 @@
 //                    parent's queue (kStreamDepth deep) is full
 //                    (WAIT_FOR_CONSUMER / BLOCK_PRODUCER); the parent
 //                    busy-polls take(), one chunk per iteration.
+//   RoundTrip        request/response: the parent is an UntypedClient that
+//                    loans an N-byte request, stamps it and sends it, then
+//                    busy-polls take() for the response; the child is an
+//                    UntypedServer that busy-polls take() and answers each
+//                    request with a loaned N-byte response carrying its
+//                    number. One request is outstanding at a time.
 //
 // iceoryx's runtime can be initialised once per process: the parent's lives
 // until exit, each child's for one benchmark run.
@@ -38,7 +44,9 @@
 #include "harness.hpp"
 #include "iceoryx_hoofs/log/logmanager.hpp"
 #include "iceoryx_hoofs/platform/platform_settings.hpp"
+#include "iceoryx_posh/popo/untyped_client.hpp"
 #include "iceoryx_posh/popo/untyped_publisher.hpp"
+#include "iceoryx_posh/popo/untyped_server.hpp"
 #include "iceoryx_posh/popo/untyped_subscriber.hpp"
 #include "iceoryx_posh/popo/wait_set.hpp"
 #include "iceoryx_posh/runtime/posh_runtime.hpp"
@@ -60,8 +68,15 @@ constexpr const char* kRoudiReady = "RouDi is ready for clients";
 
 // Mempools: every payload size the benchmarks loan, with room for a stream's
 // full queue (kStreamDepth) plus the chunks a publisher may hold (8) and
-// slack. `size` is the user payload; RouDi adds the chunk header. RouDi
-// writes zeros over all of it: about 450 MiB of /dev/shm while it runs.
+// slack. `size` is the user payload; RouDi adds the chunk header (40 B). A
+// request or response also carries an RPC header (24 or 32 B) in the same
+// chunk, so its N bytes do not fit the pool for N: the pools of N + 1 KiB
+// hold the round trips' chunks (two at a time: one request, one response),
+// which would otherwise take the next larger pool's (a 1 MiB request a 4 MiB
+// chunk) or, with none larger, abort the process: iceoryx 2.0 treats a chunk
+// too large for every pool as fatal (MEPOO__MEMPOOL_GETCHUNK_CHUNK_IS_TOO_LARGE)
+// instead of failing the loan. RouDi writes zeros over all of it: about
+// 460 MiB of /dev/shm while it runs.
 constexpr const char* kRoudiConfig = R"(# Written by prime_ipc for the RouDi it starts.
 [general]
 version = 1
@@ -77,12 +92,24 @@ size = 4096
 count = 64
 
 [[segment.mempool]]
+size = 5120
+count = 8
+
+[[segment.mempool]]
 size = 65536
 count = 64
 
 [[segment.mempool]]
+size = 66560
+count = 8
+
+[[segment.mempool]]
 size = 1048576
 count = 320
+
+[[segment.mempool]]
+size = 1049600
+count = 8
 
 [[segment.mempool]]
 size = 4194304
@@ -298,6 +325,88 @@ void drain(iox::popo::UntypedSubscriber& subscriber) {
   for (auto chunk = subscriber.take(); !chunk.has_error(); chunk = subscriber.take()) subscriber.release(chunk.value());
 }
 
+// ---- request/response -------------------------------------------------------
+
+// One request outstanding at a time: the client takes each response before it
+// sends the next request, and the server answers a request before it takes
+// the next, so neither queue ever holds more than one chunk. Should one be
+// full anyway, its producer waits instead of dropping (WAIT_FOR_CONSUMER /
+// BLOCK_PRODUCER, the pair iceoryx connects), so nothing is ever lost.
+constexpr std::uint64_t kRpcQueueCapacity = 1;
+
+iox::popo::ClientOptions lossless_client() {
+  iox::popo::ClientOptions options;
+  options.responseQueueCapacity = kRpcQueueCapacity;
+  options.responseQueueFullPolicy = iox::popo::QueueFullPolicy::BLOCK_PRODUCER;
+  options.serverTooSlowPolicy = iox::popo::ConsumerTooSlowPolicy::WAIT_FOR_CONSUMER;
+  return options;
+}
+
+iox::popo::ServerOptions lossless_server() {
+  iox::popo::ServerOptions options;
+  options.requestQueueCapacity = kRpcQueueCapacity;
+  options.requestQueueFullPolicy = iox::popo::QueueFullPolicy::BLOCK_PRODUCER;
+  options.clientTooSlowPolicy = iox::popo::ConsumerTooSlowPolicy::WAIT_FOR_CONSUMER;
+  return options;
+}
+
+[[noreturn]] void loan_failed(std::size_t bytes, iox::popo::AllocationError error) {
+  throw ipc::PeerError{"iceoryx could not loan a chunk of " + std::to_string(bytes) + " bytes (AllocationError " +
+                       std::to_string(static_cast<int>(error)) + ")"};
+}
+
+// Loans a request of `bytes`, writes `seq` into it and sends it: no copy.
+void request(iox::popo::UntypedClient& client, std::size_t bytes, std::uint64_t seq) {
+  auto chunk = client.loan(static_cast<std::uint32_t>(bytes), iox::CHUNK_DEFAULT_USER_PAYLOAD_ALIGNMENT);
+  if (chunk.has_error()) loan_failed(bytes, chunk.get_error());
+  ipc::stamp(chunk.value(), seq);
+  if (auto sent = client.send(chunk.value()); sent.has_error())
+    throw ipc::PeerError{std::string{"iceoryx could not send a request: "} +
+                         iox::popo::asStringLiteral(sent.get_error())};
+}
+
+// Takes the response, if it is in, checks it carries `seq`, and releases it.
+bool try_take(iox::popo::UntypedClient& client, std::uint64_t seq) {
+  auto chunk = client.take();
+  if (chunk.has_error()) {
+    if (chunk.get_error() == iox::popo::ChunkReceiveResult::NO_CHUNK_AVAILABLE) return false;
+    throw ipc::PeerError{"iceoryx take failed: too many responses held"};
+  }
+  const std::uint64_t got = ipc::seq_of(chunk.value());
+  client.releaseResponse(chunk.value());
+  if (got != seq) throw ipc::out_of_sequence(seq, got);
+  return true;
+}
+
+// Takes the next request, if there is one: nullptr if there is none.
+const void* try_take(iox::popo::UntypedServer& server) {
+  auto chunk = server.take();
+  if (chunk.has_error()) {
+    if (chunk.get_error() == iox::popo::ServerRequestResult::NO_PENDING_REQUESTS) return nullptr;
+    throw ipc::PeerError{std::string{"iceoryx server take failed: "} + iox::popo::asStringLiteral(chunk.get_error())};
+  }
+  return chunk.value();
+}
+
+// Answers `request` with a loaned response of `bytes` carrying its number,
+// then releases the request: no copy, and the release is off the client's
+// path.
+void answer(iox::popo::UntypedServer& server, const void* request, std::size_t bytes) {
+  const std::uint64_t seq = ipc::seq_of(request);
+  auto chunk = server.loan(iox::popo::RequestHeader::fromPayload(request), static_cast<std::uint32_t>(bytes),
+                           iox::CHUNK_DEFAULT_USER_PAYLOAD_ALIGNMENT);
+  if (chunk.has_error()) {
+    server.releaseRequest(request);
+    loan_failed(bytes, chunk.get_error());
+  }
+  ipc::stamp(chunk.value(), seq);
+  const auto sent = server.send(chunk.value());
+  server.releaseRequest(request);
+  if (sent.has_error())
+    throw ipc::PeerError{std::string{"iceoryx could not send a response: "} +
+                         iox::popo::asStringLiteral(sent.get_error())};
+}
+
 // Sleeps in `waitset` until `subscriber` has data, then takes it.
 template <ipc::Side S>
 void wait_and_take(S& side, iox::popo::WaitSet<>& waitset, iox::popo::UntypedSubscriber& subscriber, std::uint64_t seq) {
@@ -366,6 +475,23 @@ void stream(ipc::Child& self) {
 }
 const ipc::ChildEntry kStream{"Iceoryx.stream", stream};
 
+void serve(ipc::Child& self) {
+  start_child_runtime(self.arg(0));
+  iox::popo::UntypedServer server{service(self.arg(0), "rpc"), lossless_server()};
+  ipc::sleep_until(self, [&] { return server.hasClients(); });
+  self.ready();
+  for (std::uint64_t seq = 1;; ++seq) {
+    const void* request = nullptr;
+    ipc::spin_until(self, [&] { return (request = try_take(server)) != nullptr; });
+    if (const std::uint64_t got = ipc::seq_of(request); got != seq) {
+      server.releaseRequest(request);
+      throw ipc::out_of_sequence(seq, got);
+    }
+    answer(server, request, self.bytes());
+  }
+}
+const ipc::ChildEntry kServe{"Iceoryx.serve", serve};
+
 template <bool kSleeps>
 void latency(benchmark::State& state) {
   run_iceoryx(state, [&](std::size_t bytes) {
@@ -412,5 +538,23 @@ void BM_Throughput_Iceoryx(benchmark::State& state) {
   });
 }
 BENCHMARK(BM_Throughput_Iceoryx)->Apply(ipc::throughput_payloads);
+
+void BM_RoundTrip_Iceoryx(benchmark::State& state) {
+  run_iceoryx(state, [&](std::size_t bytes) {
+    const std::string topic = new_topic();
+    iox::popo::UntypedClient client{service(topic, "rpc"), lossless_client()};
+    const ChildRuntimeFiles files{topic};
+    ipc::Link child{"Iceoryx.serve", bytes, {}, {topic}};
+    child.wait_ready();
+    ipc::sleep_until(child, [&] { return client.getConnectionState() == iox::ConnectionState::CONNECTED; });
+    child.go();
+    ipc::time_round_trips(state, [&](std::uint64_t seq) {
+      request(client, bytes, seq);
+      ipc::spin_until(child, [&] { return try_take(client, seq); });
+    });
+    child.stop();
+  });
+}
+BENCHMARK(BM_RoundTrip_Iceoryx)->Apply(ipc::round_trip_payloads);
 
 }  // namespace
