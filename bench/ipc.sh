@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Prime's Shm medium against its peers between two processes, as Markdown
 # tables, from one run of prime_ipc: one-way latency per payload, throughput,
-# and the targets of the Shm issue.
+# service round trips, and the targets of the Shm and services issues.
 #
 #   bench/ipc.sh [path/to/prime_ipc] [--ipc_no_pin] [more --benchmark_* flags]
 #
@@ -41,6 +41,7 @@ runs, context = report["benchmarks"], report["context"]
 # "BM_Latency_Shm/4096/real_time" -> ("Latency", "Shm", 4096): the median of
 # the repetitions, or the only run when there was one.
 latency, throughput, depth, errors = {}, {}, {}, {}
+round_trip, calls = {}, {}
 for run in runs:
     kind, peer = run["run_name"].split("/")[0].removeprefix("BM_").split("_", 1)
     payload = int(run["run_name"].split("/")[1])
@@ -51,6 +52,10 @@ for run in runs:
         continue
     if kind == "Latency" and "one_way_ns" in run:
         latency[(peer, payload)] = run["one_way_ns"]
+    elif kind == "RoundTrip" and "one_way_ns" in run:
+        round_trip[(peer, payload)] = 2 * run["one_way_ns"]
+    elif kind == "Calls" and "calls/s" in run:
+        calls[(peer, payload)] = run["calls/s"]
     elif kind == "Throughput" and "msgs/s" in run:
         throughput[(peer, payload)] = run["msgs/s"]
         if "depth" in run:
@@ -124,6 +129,31 @@ print("|---|" + "---:|" * len(streams))
 for p in sorted({p for (_, p) in throughput} | {64, 1 << 20}):
     print(f"| {size(p)} | " + " | ".join(rate(throughput.get((peer, p))) for peer in streams) + " |")
 
+# Services: a request and its answer, N bytes each way. Floor and FutexWake
+# round trips are twice their one-way figures; a Unix-socket ping-pong of N
+# bytes is a request/reply over the socket.
+floor_rt = None if floor is None else 2 * floor
+futex_rt = None if futex is None else 2 * futex
+service_payloads = sorted({p for (peer, p) in round_trip if peer in ("ShmService", "Iceoryx")} | {64})
+print(f"\n**Services: round trip**, request and reply of N bytes (Floor's round trip {ns(floor_rt)}, "
+      f"two futex wakes {ns(futex_rt)}).\n")
+print("| payload | ShmService (busy) | Iceoryx request/response | UnixSocket request/reply | ShmService (sleeping) |")
+print("|---|---:|---:|---:|---:|")
+for p in service_payloads:
+    v = round_trip.get(("ShmService", p))
+    iox = round_trip.get(("Iceoryx", p))
+    uds = latency.get(("UnixSocket", p))
+    uds = None if uds is None else 2 * uds
+    cell = ns(v) + ("" if v is None else f" ({show(ratio(v, floor_rt))}× Floor, {show(ratio(v, iox))}× Iceoryx)")
+    s = round_trip.get(("ShmServiceSleeping", p))
+    sleeping_cell = ns(s) + ("" if s is None else f" ({show(ratio(s, futex_rt))}× two futex wakes)")
+    print(f"| {size(p)} | {cell} | {ns(iox)} | {ns(uds)} | {sleeping_cell} |")
+linked, routed = round_trip.get(("ShmServicesLinked", 64)), round_trip.get(("ShmServicesRouted", 64))
+print(f"\n- Two services, linked (`a | b`: a's output goes straight to b): {ns(linked)}; "
+      f"the same two called in turn by the client: {ns(routed)} ({show(ratio(linked, routed))}×).")
+print(f"- Calls per second that one service answers: {rate(calls.get(('ShmService', 1)))} for 1 client process, "
+      f"{rate(calls.get(('ShmService', 4)))} for 4.")
+
 # "mqueue_skipped_latency_1048576": a payload PosixMqueue's limits rule out.
 notes = []
 for k, v in context.items():
@@ -162,4 +192,14 @@ print(verdict("ShmSleeping ≤ 1.5× FutexWake (ShmSleeping/FutexWake)", [ratio(
               lambda r: r <= 1.5, max))
 t = throughput.get(("Shm", 64))
 print(verdict("Shm ≥ 10 M msgs/s at 64 B (in M msgs/s)", [None if t is None else t / 1e6], lambda v: v >= 10, min))
+
+print("\nTargets (services issue)\n")
+service_busy = [round_trip.get(("ShmService", p)) for p in service_payloads]
+print(verdict("ShmService round trip ≤ 2.5× Floor's", [ratio(v, floor_rt) for v in service_busy], lambda r: r <= 2.5, max))
+print(verdict("ShmService ≤ 0.3× Iceoryx request/response",
+              [ratio(round_trip.get(("ShmService", p)), round_trip.get(("Iceoryx", p))) for p in service_payloads],
+              lambda r: r <= 0.3, max))
+print(verdict("ShmService sleeping ≤ 1.5× two futex wakes", [ratio(round_trip.get(("ShmServiceSleeping", 64)), futex_rt)],
+              lambda r: r <= 1.5, max))
+print(verdict("Linked faster than routed by the client (linked/routed)", [ratio(linked, routed)], lambda r: r < 1, max))
 EOF

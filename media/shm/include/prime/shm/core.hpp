@@ -188,36 +188,44 @@ class Core : public ErasedChainRuntime {
     using Reply = detail::wire_t<std::invoke_result_t<const F&, Argument>>;
     static_assert(Message<Request> && Message<Reply>,
                   "prime::shm: a service carries trivially copyable messages (or raw bytes) both ways");
-    const detail::ServiceSpec spec{Fingerprint::of<Request>(), Fingerprint::of<Reply>(),
-                                   detail::complete(name, Fingerprint::of<Request>(), std::is_same_v<Request, Bytes>,
-                                                    Fingerprint::of<Reply>(), std::is_same_v<Reply, Bytes>, qos)};
-    auto handler = [block = std::move(block)](const std::byte* request, std::size_t size, std::byte* out,
-                                              std::size_t capacity) -> std::size_t {
-      auto argument = [&]() -> Argument {
-        if constexpr (std::is_same_v<Request, Bytes>) return {request, size};
-        else return *std::launder(reinterpret_cast<const Request*>(request));
-      };
+    return host<Request, Reply>(name, qos, [block = std::move(block)](const std::byte* request, std::size_t size,
+                                                                      std::byte* out, std::size_t capacity) -> std::size_t {
       if constexpr (std::is_same_v<Reply, Bytes>) {
-        const auto reply = std::invoke(block, argument());
+        const auto reply = std::invoke(block, detail::Wire<Request>::view(request, size));
         if (reply.size() > capacity)
           throw Failure{{Errc::limit_exceeded, "a reply of " + std::to_string(reply.size()) +
                                                    " bytes exceeds max_reply_size (" + std::to_string(capacity) + " bytes)"}};
         if (!reply.empty()) std::memcpy(out, reply.data(), reply.size());
         return reply.size();
       } else {
-        ::new (out) Reply(std::invoke(block, argument()));  // made where the caller reads it
+        ::new (out) Reply(std::invoke(block, detail::Wire<Request>::view(request, size)));  // made where the caller reads it
         return sizeof(Reply);
       }
-    };
-    auto service = detail::Service::open_to_serve(registry_, name, spec);
-    auto server = std::make_shared<detail::Server>(std::move(service), spec.qos, std::move(handler),
-                                                   [runtime = runtime()](Error e) {
-                                                     if (auto r = runtime.lock()) r->report(std::move(e));
-                                                   });
-    auto owner = runtime().lock();
-    for (std::size_t w = 0; w < spec.qos.workers; ++w)
-      owner->spawn([server, w](std::stop_token stop) { server->work(w, stop); });
-    return chain<Request, Reply>(name);
+    });
+  }
+
+  // Hosts a block that writes its answer itself, in place: for large
+  // replies that should never be copied. For messages,
+  // `void(const In&, Out&)` (the reply is default-initialised where the
+  // caller reads it); for raw bytes (In or Out = shm::Bytes),
+  // `std::size_t(std::span<const std::byte> request, std::span<std::byte> reply)`,
+  // returning the reply's size. Otherwise as serve().
+  template <Message In, Message Out, class F>
+  auto serve_in_place(const std::string& name, F block, ServiceQos qos = {}) {
+    return host<In, Out>(name, qos, [block = std::move(block)](const std::byte* request, std::size_t size, std::byte* out,
+                                                               std::size_t capacity) -> std::size_t {
+      if constexpr (std::is_same_v<Out, Bytes>) {
+        const std::size_t n = std::invoke(block, detail::Wire<In>::view(request, size), std::span<std::byte>{out, capacity});
+        if (n > capacity)
+          throw Failure{{Errc::limit_exceeded, "a reply of " + std::to_string(n) + " bytes exceeds max_reply_size (" +
+                                                   std::to_string(capacity) + " bytes)"}};
+        return n;
+      } else {
+        auto* reply = ::new (out) Out;
+        std::invoke(block, detail::Wire<In>::view(request, size), *reply);
+        return sizeof(Out);
+      }
+    });
   }
 
   // A chain that calls the service `name`, served by this process or any
@@ -299,6 +307,24 @@ class Core : public ErasedChainRuntime {
       throw Failure{{Errc::qos_mismatch, "topic '" + name + "' exists with " + detail::describe(have) + "; this " +
                                              side + " asks for " + detail::describe(qos)}};
     return topic;
+  }
+
+  // Serves `name` with `handler` on qos.workers workers of this core;
+  // returns a chain that calls it.
+  template <Message Request, Message Reply>
+  ServiceChain<Request, Reply> host(const std::string& name, const ServiceQos& qos, detail::Handler handler) {
+    const detail::ServiceSpec spec{Fingerprint::of<Request>(), Fingerprint::of<Reply>(),
+                                   detail::complete(name, Fingerprint::of<Request>(), std::is_same_v<Request, Bytes>,
+                                                    Fingerprint::of<Reply>(), std::is_same_v<Reply, Bytes>, qos)};
+    auto service = detail::Service::open_to_serve(registry_, name, spec);
+    auto server = std::make_shared<detail::Server>(std::move(service), spec.qos, std::move(handler),
+                                                   [runtime = runtime()](Error e) {
+                                                     if (auto r = runtime.lock()) r->report(std::move(e));
+                                                   });
+    auto owner = runtime().lock();
+    for (std::size_t w = 0; w < spec.qos.workers; ++w)
+      owner->spawn([server, w](std::stop_token stop) { server->work(w, stop); });
+    return chain<Request, Reply>(name);
   }
 
   static std::string program_name() {

@@ -32,7 +32,11 @@ struct Wire {
     ::new (to) T(v);
     return sizeof(T);
   }
-  static T read(const std::byte* from, std::size_t) { return *std::launder(reinterpret_cast<const T*>(from)); }
+  static T read(const std::byte* from, std::size_t) { return view(from, 0); }
+  // The message where it lies.
+  static const T& view(const std::byte* at, std::size_t) { return *std::launder(reinterpret_cast<const T*>(at)); }
+  using place = T&;  // where a request or reply is written in place
+  static T& place_at(std::byte* at, std::size_t) { return *::new (at) T; }
 };
 template <>
 struct Wire<Bytes> {
@@ -46,6 +50,9 @@ struct Wire<Bytes> {
     return v.size();
   }
   static value read(const std::byte* from, std::size_t size) { return value(from, from + size); }
+  static std::span<const std::byte> view(const std::byte* at, std::size_t size) { return {at, size}; }
+  using place = std::span<std::byte>;
+  static std::span<std::byte> place_at(std::byte* at, std::size_t capacity) { return {at, capacity}; }
 };
 
 // The message type a block's argument or result travels as.
@@ -90,6 +97,31 @@ class ServiceChain {
         [&](const std::byte* from, std::size_t size) { out.emplace(detail::Wire<Out>::read(from, size)); }, false);
     if (!done) return std::unexpected(std::move(done.error()));
     return std::move(*out);
+  }
+
+  // A call with no copy either way: `write(request)` fills the request
+  // where the service reads it, and `read(reply)` reads the answer where the
+  // service made it. For messages, write(In&) gets a default-initialised
+  // In and read(const Out&) the answer; for raw bytes (shm::Bytes),
+  // write(std::span<std::byte>) returns the request's size and
+  // read(std::span<const std::byte>) gets the answer.
+  template <class Write, class Read>
+  [[nodiscard]] std::expected<void, Error> call_in_place(Write&& write, Read&& read) const {
+    return detail::call(
+        *route_,
+        [&](std::byte* to, std::size_t capacity) -> std::size_t {
+          if constexpr (std::is_same_v<In, Bytes>) {
+            const std::size_t n = write(detail::Wire<In>::place_at(to, capacity));
+            if (n > capacity)
+              throw Failure{{Errc::limit_exceeded, "a request of " + std::to_string(n) + " bytes exceeds max_request_size (" +
+                                                       std::to_string(capacity) + " bytes)"}};
+            return n;
+          } else {
+            write(detail::Wire<In>::place_at(to, capacity));
+            return sizeof(In);
+          }
+        },
+        [&](const std::byte* from, std::size_t size) { read(detail::Wire<Out>::view(from, size)); }, false);
   }
 
   // Sends `in` and returns once it is queued, not waiting for the answer

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <optional>
 #include <stop_token>
 
 #include "prime/logic/sample.hpp"
@@ -26,12 +27,13 @@ enum class Waited { ready, timeout, stopped };
 // and looks again, until `ready()`, `deadline` or a stop request. `sleep`
 // must not sleep through a stop request (ring the sleeper from a
 // stop_callback, or use a stop-aware wait).
+// `now`: the time the caller read last, if it has it (a clock read saved).
 template <class Ready, class Sleep>
 Waited spin_then_sleep(Ready&& ready, Sleep&& sleep, std::chrono::nanoseconds spin, Clock::time_point deadline,
-                       const std::stop_token& stop) {
+                       const std::stop_token& stop, std::optional<Clock::time_point> now = std::nullopt) {
   if (ready()) return Waited::ready;
   if (spin > std::chrono::nanoseconds::zero()) {
-    const auto until = std::min(deadline, Clock::now() + spin);
+    const auto until = std::min(deadline, now.value_or(Clock::now()) + spin);
     do {
       for (int i = 0; i < 64; ++i) {  // a clock read costs more than a look
         if (ready()) return Waited::ready;

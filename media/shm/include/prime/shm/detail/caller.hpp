@@ -1,6 +1,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -44,11 +45,13 @@ class Binding {
 
   // The service with a live server and this client's slot in it, waiting
   // for one up to ClientQos::wait_for_service; or why not.
-  std::expected<std::shared_ptr<Service>, Error> ready() {
-    const auto give_up = Clock::now() + qos_.wait_for_service;
+  std::expected<std::shared_ptr<Service>, Error> ready(Clock::time_point now) {
+    auto bound = bind(now);
+    if (bound || bound.error().code != Errc::not_found || qos_.wait_for_service <= Clock::duration::zero()) return bound;
+    const auto give_up = now + qos_.wait_for_service;
     auto pause = std::chrono::microseconds{100};
     while (true) {
-      auto bound = bind();
+      bound = bind(Clock::now());
       if (bound || bound.error().code != Errc::not_found || Clock::now() >= give_up) return bound;
       std::this_thread::sleep_for(std::min<Clock::duration>(pause, give_up - Clock::now()));
       pause = std::min(pause * 2, std::chrono::microseconds{10000});
@@ -57,12 +60,12 @@ class Binding {
 
   // Claims a cell of this client's in `service` for one call, checking the
   // service's limits; its ticket is in the cell's status.
-  std::expected<std::size_t, Error> claim(Service& service) {
+  std::expected<std::size_t, Error> claim(Service& service, Clock::time_point at) {
     auto& h = service.header();
-    const auto now = Clock::now().time_since_epoch().count();
+    const auto now = at.time_since_epoch().count();
     auto& slot = h.clients[slot_];
-    if (const auto gap = h.min_interval_ns.load(); gap > 0 && slot.last_request.load() != 0 &&
-                                                   now - slot.last_request.load() < gap)
+    const auto gap = h.min_interval_ns.load(std::memory_order_relaxed);
+    if (gap > 0 && slot.last_request.load() != 0 && now - slot.last_request.load() < gap)
       return limit(service, "a client sends at most one request every " + std::to_string(gap / 1000) +
                                 " us (min_interval)");
     if (const auto depth = h.queue_depth.load(); depth > 0 && service.queued() >= depth)
@@ -73,8 +76,8 @@ class Binding {
       auto s = status.load();
       if (Status::state(s) != CellState::free) continue;
       if (status.compare_exchange_strong(s, Status::pack(Status::ticket(s), CellState::claimed))) {
-        slot.last_request.store(now);
-        slot.calls.fetch_add(1);
+        if (gap > 0) slot.last_request.store(now, std::memory_order_relaxed);
+        slot.calls.fetch_add(1, std::memory_order_relaxed);
         return first + k;
       }
     }
@@ -83,8 +86,14 @@ class Binding {
   }
 
  private:
-  std::expected<std::shared_ptr<Service>, Error> bind() {
+  std::expected<std::shared_ptr<Service>, Error> bind(Clock::time_point now) {
     std::scoped_lock lock{mutex_};
+    // The fast path: bound, the same server as when last looked at, and that
+    // not long ago. Looking at a lease costs a system call; a server that
+    // died since is seen by the next look, or by a waiting call's.
+    if (service_ && service_->header().server.load(std::memory_order_relaxed) == checked_server_ && checked_server_ != 0 &&
+        now < checked_until_)
+      return service_;
     if (service_ && !live(*service_)) {
       // Its server is gone: a new one may serve a new segment under the name.
       if (!service_->current()) release_slot();
@@ -104,6 +113,8 @@ class Binding {
     if (server == 0) return not_found("service '" + name_ + "' has no server (none started, or it stopped)");
     if (!registry_->alive(server))
       return not_found("service '" + name_ + "' has no live server: " + registry_->describe(server) + " died");
+    checked_server_ = server;
+    checked_until_ = now + std::chrono::milliseconds{1};
     return service_;
   }
 
@@ -153,6 +164,8 @@ class Binding {
   std::mutex mutex_;
   std::shared_ptr<Service> service_;
   std::size_t slot_ = 0;
+  ParticipantId checked_server_ = 0;  // the server last seen alive, and until when that is trusted
+  Clock::time_point checked_until_{};
 };
 
 // Writes a request: its bytes at `to` (room for `capacity`); returns its size.
@@ -166,33 +179,43 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
                                        const std::function<void(const std::byte*, std::size_t)>& read, bool posted) {
   struct Held {
     std::shared_ptr<Service> service;
-    std::size_t cell;
-    std::uint64_t ticket;
+    std::size_t cell = 0;
+    std::uint64_t ticket = 0;
   };
-  std::vector<Held> held;
-  held.reserve(route.size());
+  struct Cells {  // the cells this call holds, one per service of the route (no allocation per call)
+    std::array<Held, kMaxHops> at;
+    std::size_t count = 0;
+    Held* begin() { return at.data(); }
+    Held* end() { return at.data() + count; }
+    Held& front() { return at[0]; }
+    Held& back() { return at[count - 1]; }
+    std::size_t size() const { return count; }
+    Held& operator[](std::size_t i) { return at[i]; }
+  } held;
   auto release_all = [&] {
     for (auto& h : held) h.service->release(h.cell);
   };
+  const auto now = Clock::now();
   for (const auto& binding : route) {
-    auto service = binding->ready();
+    auto service = binding->ready(now);
     if (!service) {
       release_all();
       return std::unexpected(std::move(service.error()));
     }
-    auto cell = binding->claim(**service);
+    auto cell = binding->claim(**service, now);
     if (!cell) {
       release_all();
       return std::unexpected(std::move(cell.error()));
     }
-    held.push_back({*service, *cell, Status::ticket((*service)->cell(*cell).status.load())});
+    held.at[held.count++] = {std::move(*service), *cell, 0};
+    held.back().ticket = Status::ticket(held.back().service->cell(*cell).status.load());
   }
 
   // The call's deadline: the client's timeout, or the longest its services allow.
   auto timeout = std::chrono::nanoseconds{route.front()->qos().timeout};
   if (timeout == std::chrono::nanoseconds::zero())
     for (auto& h : held) timeout = std::max(timeout, std::chrono::nanoseconds{h.service->header().timeout_ns.load()});
-  const auto deadline = Clock::now() + timeout;
+  const auto deadline = now + timeout;
 
   auto& first = held.front();
   auto& c = first.service->cell(first.cell);
@@ -202,7 +225,7 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
     release_all();
     return std::unexpected(f.error());
   }
-  c.stamp = Clock::now().time_since_epoch().count();
+  c.stamp = now.time_since_epoch().count();
   c.posted = posted ? 1 : 0;
   c.next_hops = static_cast<std::uint32_t>(held.size() - 1);
   for (std::size_t k = 1; k < held.size(); ++k)
@@ -210,7 +233,7 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   if (posted)  // the workers free what a post leaves; the caller lets go of the rest now
     for (std::size_t k = 1; k < held.size(); ++k) held[k].service->cell(held[k].cell).posted = 1;
   c.status.store(Status::pack(first.ticket, CellState::queued), std::memory_order_release);
-  first.service->header().requests_in.fetch_add(1);
+  first.service->header().requests_in.fetch_add(1, std::memory_order_relaxed);
   first.service->enqueue(first.cell);
   if (posted) return {};
 
@@ -240,7 +263,7 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
     answer.answered.sleep_until(1, answered, std::min(until, Clock::now() + std::chrono::milliseconds{50}));
     if (!answered()) check();
   };
-  (void)prime::detail::spin_then_sleep(over, sleep, route.back()->qos().spin, deadline, std::stop_token{});
+  (void)prime::detail::spin_then_sleep(over, sleep, route.back()->qos().spin, deadline, std::stop_token{}, now);
   if (!answered()) {
     release_all();
     if (gone) return std::unexpected(std::move(*gone));

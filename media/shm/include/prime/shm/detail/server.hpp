@@ -74,14 +74,14 @@ class Server {
           if (word.load(std::memory_order_relaxed) != 0) return true;
         return false;
       };
-      auto next_check = Clock::now();
+      std::optional<Clock::time_point> next_check;  // read only once the worker sleeps: a busy one reads no clock
       auto sleep = [&](Clock::time_point until) {
-        if (Clock::now() >= next_check) {  // idle: a good time to free what dead clients left
+        if (!next_check || Clock::now() >= *next_check) {  // idle: a good time to free what dead clients left
           service_->reclaim_dead_clients();
           next_check = Clock::now() + std::chrono::milliseconds{100};
         }
         h.requests.sleep_until(1ull << index, [&] { return ready() || stop.stop_requested(); },
-                               std::min(until, next_check));
+                               std::min(until, *next_check));
       };
       if (prime::detail::spin_then_sleep(ready, sleep, spin_, Clock::time_point::max(), stop) !=
           prime::detail::Waited::ready)
@@ -101,9 +101,14 @@ class Server {
         const auto rotate = static_cast<int>(start % 64);
         const auto pick = (std::rotr(bits, rotate) & -std::rotr(bits, rotate));  // lowest bit from `rotate` on
         const auto bit = std::rotl(pick, rotate);
+        const auto cell = w * 64 + static_cast<std::size_t>(std::countr_zero(bit));
+        // Fetch the cell's status and request while the bit is taken: the
+        // transfers overlap instead of following one another.
+        __builtin_prefetch(&service_->cell(cell).status, 1);
+        __builtin_prefetch(service_->request(cell));
         if (h.pending[w].fetch_and(~bit, std::memory_order_acq_rel) & bit) {
           ++start;
-          return w * 64 + static_cast<std::size_t>(std::countr_zero(bit));
+          return cell;
         }
         bits &= ~bit;
       }

@@ -101,10 +101,12 @@ struct ServiceHeader {
   std::atomic<std::uint64_t> incarnation{0};  // servers it has had
   alignas(64) std::atomic<std::uint64_t> pending[kPendingWords]{};
   Doorbell requests;  // idle workers sleep here, one bit each
-  alignas(64) std::atomic<std::uint64_t> served{0};        // calls answered
+  // Counters, each on the line of whoever writes it, so counting costs no
+  // transfer between caller and worker.
+  alignas(64) std::atomic<std::uint64_t> requests_in{0};   // queued by callers
+  alignas(64) std::atomic<std::uint64_t> forwarded_in{0};  // queued by the service before it in a linked call
+  alignas(64) std::atomic<std::uint64_t> served{0};        // calls answered (by the workers from here on)
   std::atomic<std::uint64_t> failed{0};                    // calls answered with an error
-  std::atomic<std::uint64_t> requests_in{0};               // queued by callers
-  std::atomic<std::uint64_t> forwarded_in{0};              // queued by the service before it in a linked call
   std::atomic<std::uint64_t> replies_out{0};               // answers to callers
   std::atomic<std::uint64_t> forwarded_out{0};             // outputs written into the next service's cell
   ClientSlot clients[kMaxServiceClients];
