@@ -65,9 +65,10 @@ TEST(ShmPeerFaults, ASubscriberKilledAsleepCostsLaterPublishesNothing) {
   EXPECT_LT(shm::detail::futex_syscalls.load() - calls, 100u) << "system calls in 100,000 publishes after the sleeper died";
 
   const auto costs = compare([&] { (void)publisher.publish(n++); }, [&] { (void)untouched.publish(n++); });
-  if (kTimingMeansSomething)
+  if (kTimingMeansSomething) {
     EXPECT_LE(costs.a_ns, 1.2 * costs.b_ns) << costs.a_ns << " ns per message where a sleeper died, " << costs.b_ns
                                             << " where none ever slept";
+  }
 }
 
 TEST(ShmPeerFaults, ABlockPublisherKilledAsleepCostsItsSuccessorNothing) {
@@ -105,9 +106,10 @@ TEST(ShmPeerFaults, ABlockPublisherKilledAsleepCostsItsSuccessorNothing) {
         (void)fresh_publisher.publish(n++);
         (void)fresh.try_read();
       });
-  if (kTimingMeansSomething)
+  if (kTimingMeansSomething) {
     EXPECT_LE(costs.a_ns, 1.2 * costs.b_ns) << costs.a_ns << " ns per message after the death, " << costs.b_ns
                                             << " on a topic no one died on";
+  }
 }
 
 TEST(ShmPeerFaults, AStuckSubscriberIsReportedOnceAndNoLongerWaitedFor) {

@@ -238,7 +238,7 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   if (posted) return {};
 
   // Wait for the last cell: spinning, then asleep in slices, looking after
-  // each at the servers of the route (a dead one is reported within ~50 ms).
+  // each at the servers of the route (a dead one is reported within ~25 ms).
   auto& last = held.back();
   auto& answer = last.service->cell(last.cell);
   const auto done = Status::pack(last.ticket, CellState::done);
@@ -248,19 +248,24 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
     return s == done || s == failed;
   };
   std::optional<Error> gone;
+  // A server gone before any worker took the request means there was no
+  // service to call (not_found); gone after, that the call died with it.
   auto check = [&] {
+    const bool taken = first.service->cell(first.cell).status.load() != Status::pack(first.ticket, CellState::queued);
     for (auto& h : held) {
       const auto server = h.service->header().server.load();
       if (server == 0)
         gone = Error{Errc::stopped, "service '" + h.service->name() + "' stopped while this call waited"};
       else if (!h.service->registry().alive(server))
-        gone = Error{Errc::peer_dead, "service '" + h.service->name() + "': its server, " +
-                                          h.service->registry().describe(server) + ", died while this call waited"};
+        gone = taken ? Error{Errc::peer_dead, "service '" + h.service->name() + "': its server, " +
+                                                  h.service->registry().describe(server) + ", died while this call waited"}
+                     : Error{Errc::not_found, "service '" + h.service->name() + "' has no live server: " +
+                                                  h.service->registry().describe(server) + " died"};
     }
   };
   auto over = [&] { return answered() || gone.has_value(); };
   auto sleep = [&](Clock::time_point until) {
-    answer.answered.sleep_until(1, answered, std::min(until, Clock::now() + std::chrono::milliseconds{50}));
+    answer.answered.sleep_until(1, answered, std::min(until, Clock::now() + std::chrono::milliseconds{25}));
     if (!answered()) check();
   };
   (void)prime::detail::spin_then_sleep(over, sleep, route.back()->qos().spin, deadline, std::stop_token{}, now);
