@@ -140,6 +140,7 @@ int main(int argc, char** argv) {
     std::atomic<std::uint64_t> matched{0}, wrong{0};
     auto checked = sets | local.chain([&](const std::tuple<shm::View<std::uint64_t>, shm::View<std::uint64_t>>& set) {
                      wrong += *std::get<0>(set) == *std::get<1>(set) ? 0 : 1;
+                     std::this_thread::sleep_for(1ms);  // a slow consumer: sets wait for it
                      return ++matched;
                    });
     auto newest = collector(local, sets);
