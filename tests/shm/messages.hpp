@@ -4,6 +4,8 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "prime/common/bounded_string.hpp"
+#include "prime/common/schema.hpp"
 #include "prime/shm/qos.hpp"
 
 namespace prime::test {
@@ -43,6 +45,21 @@ struct Ask {
 struct Answer {
   std::uint64_t who;
   std::uint64_t n;
+};
+PRIME_DESCRIBE(Ask, who, n)
+PRIME_DESCRIBE(Answer, who, n)
+
+// A described message with text and numbers, for the command-line tool.
+struct Tick {
+  std::uint64_t n;
+  double x;
+  bounded_string<8> tag;
+};
+PRIME_DESCRIBE(Tick, n, x, tag)
+
+// A message with no description: tools show its bytes.
+struct Raw {
+  std::uint64_t a, b;
 };
 
 // A megabyte image: a topic of these with default QoS takes 130 MiB.

@@ -16,6 +16,9 @@
 //   shm_peer sequence_publish <domain> <topic> <count>           block: 0..count-1 as fast as possible
 //   shm_peer leave_segments <domain> <topic>                     create a topic, print, sleep (to be killed)
 //   shm_peer serve    <domain> <service> <echo|twice|plus|hang>  serve until killed (hang: answers nothing, says "running")
+//   shm_peer ticks    <domain> <topic> <hz> <age_ms>             publish Ticks at hz, each stamped age_ms in the past
+//   shm_peer raw      <domain> <topic>                           publish one Raw {0x1122334455667788, 42}, then wait
+//   shm_peer listen   <domain> <topic>                           print each Tick received: "tick <n> <x> <tag>"
 //   shm_peer call_many <domain> <service> <threads> <calls>      echo: each thread's calls checked, print "ok <n>"
 //   shm_peer call_once <domain> <service> <value>                print "calling", call, print the answer
 #include <unistd.h>
@@ -224,6 +227,36 @@ int main(int argc, char** argv) {
       fail("unknown service kind " + kind);
     say("serving");
     forever();
+  }
+  if (role == "ticks" && argc == 6) {
+    auto publisher = core.publisher<test::Tick>(topic);
+    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / static_cast<double>(arg(4))));
+    const auto age = std::chrono::milliseconds{arg(5)};
+    say("publishing");
+    std::uint64_t n = 0;
+    for (auto next = Clock::now();; next += period) {
+      std::this_thread::sleep_until(next);
+      test::Tick tick{n, static_cast<double>(n) / 2, bounded_string<8>{"t" + std::to_string(n % 100)}};
+      ++n;
+      if (auto sent = publisher.publish(tick, Clock::now() - age); !sent) fail(sent.error().describe());
+    }
+  }
+  if (role == "raw" && argc == 4) {
+    auto publisher = core.publisher<test::Raw>(topic);
+    auto reader = core.subscribe<test::Raw>(topic).subscribe();  // so the topic keeps its sample for a late observer
+    say("ready");
+    for (int i = 0;; ++i) {
+      if (auto sent = publisher.publish({0x1122334455667788ull, 42}); !sent) fail(sent.error().describe());
+      std::this_thread::sleep_for(20ms);
+    }
+  }
+  if (role == "listen" && argc == 4) {
+    auto reader = core.subscribe<test::Tick>(topic).subscribe();
+    say("listening");
+    while (true) {
+      auto got = reader.read_for(1h);
+      if (got) say("tick " + std::to_string(got->value->n) + " " + std::to_string(got->value->x) + " " + got->value->tag.str());
+    }
   }
   if (role == "call_many" && argc == 6) {
     auto echo = core.chain<test::Ask, test::Answer>(topic, {.timeout = 30s});

@@ -26,8 +26,11 @@ class PeerProcess {
   // shm_peer with `args`.
   explicit PeerProcess(std::vector<std::string> args) : PeerProcess{with_peer(std::move(args)), 0} {}
 
-  // Any command, found on the PATH: `{"unshare", "--pid", ..., SHM_PEER_PATH, ...}`.
-  static PeerProcess command(std::vector<std::string> argv) { return PeerProcess{std::move(argv), 0}; }
+  // Any command, found on the PATH: `{"unshare", "--pid", ..., SHM_PEER_PATH, ...}`;
+  // `with_stderr`: what it writes to stderr is read too, mixed in.
+  static PeerProcess command(std::vector<std::string> argv, bool with_stderr = false) {
+    return PeerProcess{std::move(argv), with_stderr ? 1 : 0};
+  }
 
   PeerProcess(PeerProcess&& other) noexcept
       : pid_{std::exchange(other.pid_, -1)}, code_{other.code_}, out_{std::exchange(other.out_, -1)},
@@ -39,12 +42,13 @@ class PeerProcess {
     return args;
   }
 
-  PeerProcess(std::vector<std::string> args, int) {
+  PeerProcess(std::vector<std::string> args, int with_stderr) {
     int fds[2];
     if (::pipe2(fds, O_CLOEXEC) != 0) throw std::runtime_error{"pipe failed"};
     posix_spawn_file_actions_t actions;
     posix_spawn_file_actions_init(&actions);
     posix_spawn_file_actions_adddup2(&actions, fds[1], STDOUT_FILENO);
+    if (with_stderr) posix_spawn_file_actions_adddup2(&actions, fds[1], STDERR_FILENO);
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -96,6 +100,13 @@ class PeerProcess {
       if (n <= 0) return std::nullopt;  // it exited
       buffer_.append(chunk, static_cast<std::size_t>(n));
     }
+  }
+
+  // Everything it prints until it exits (within `timeout`).
+  std::string all_output(std::chrono::milliseconds timeout = std::chrono::seconds{60}) {
+    std::string all;
+    while (auto line = next_line_where([](const std::string&) { return true; }, timeout)) all += *line + "\n";
+    return all + buffer_;
   }
 
   void kill9() {

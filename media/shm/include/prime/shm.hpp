@@ -4,7 +4,9 @@
 // other processes of the same domain.
 #include "prime/common/bounded_string.hpp"
 #include "prime/common/bounded_vector.hpp"
+#include "prime/common/schema.hpp"
 #include "prime/shm/core.hpp"
+#include "prime/shm/inspect.hpp"
 #include "prime/shm/message.hpp"
 #include "prime/shm/publisher.hpp"
 #include "prime/shm/qos.hpp"

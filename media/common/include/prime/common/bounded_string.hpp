@@ -42,6 +42,10 @@ class bounded_string {
   [[nodiscard]] constexpr std::size_t size() const noexcept { return size_; }
   [[nodiscard]] constexpr bool empty() const noexcept { return size_ == 0; }
   [[nodiscard]] static constexpr std::size_t capacity() noexcept { return N; }
+  // Where the count and the characters lie: for tools that read the bytes
+  // of a message whose type they never saw (prime::schema_of).
+  [[nodiscard]] static constexpr std::size_t size_offset() noexcept { return offsetof(bounded_string, size_); }
+  [[nodiscard]] static constexpr std::size_t data_offset() noexcept { return offsetof(bounded_string, data_); }
   [[nodiscard]] std::string str() const { return std::string{view()}; }
   constexpr operator std::string_view() const noexcept { return view(); }  // NOLINT
 

@@ -60,6 +60,10 @@ class bounded_vector {
   [[nodiscard]] constexpr std::size_t size() const noexcept { return size_; }
   [[nodiscard]] constexpr bool empty() const noexcept { return size_ == 0; }
   [[nodiscard]] static constexpr std::size_t capacity() noexcept { return N; }
+  // Where the count and the values lie: for tools that read the bytes of a
+  // message whose type they never saw (prime::schema_of).
+  [[nodiscard]] static constexpr std::size_t size_offset() noexcept { return offsetof(bounded_vector, size_); }
+  [[nodiscard]] static constexpr std::size_t data_offset() noexcept { return offsetof(bounded_vector, items_); }
   [[nodiscard]] constexpr T* data() noexcept { return items_.data(); }
   [[nodiscard]] constexpr const T* data() const noexcept { return items_.data(); }
   [[nodiscard]] constexpr T& operator[](std::size_t i) noexcept { return items_[i]; }

@@ -12,11 +12,13 @@
 #include <utility>
 
 #include "prime/common/fingerprint.hpp"
+#include "prime/common/schema.hpp"
 #include "prime/logic/error.hpp"
 #include "prime/logic/event.hpp"
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/registry.hpp"
 #include "prime/shm/detail/server.hpp"
+#include "prime/shm/detail/snapshot.hpp"
 #include "prime/shm/detail/service.hpp"
 #include "prime/shm/detail/topic.hpp"
 #include "prime/shm/message.hpp"
@@ -239,55 +241,41 @@ class Core : public ErasedChainRuntime {
   }
 
   // The domain's participants, topics and services as they are now.
-  [[nodiscard]] RegistrySnapshot registry() {
-    RegistrySnapshot s;
-    s.participants = registry_->participants();
-    for (const auto& name : registry_->topics()) {
-      auto topic = detail::Topic::inspect(registry_, name);
-      if (!topic) continue;
-      auto& h = topic->header();
-      RegistrySnapshot::Topic t{name, h.type.describe(), topic->qos(), 0, {}, {}, h.head.load()};
-      if (const auto publisher = h.publisher.load(); registry_->alive(publisher)) {
-        t.publisher_pid = registry_->pid_of(publisher);
-        t.publisher = registry_->name_of(publisher);
-      }
-      for (std::size_t i = 0; i < h.max_subscribers; ++i)
-        if (const auto owner = h.subscribers[i].owner.load(); registry_->alive(owner))
-          t.subscriber_pids.push_back(registry_->pid_of(owner));
-      s.topics.push_back(std::move(t));
-    }
-    for (const auto& name : registry_->names(detail::EndpointKind::service)) {
-      auto service = detail::Service::open_existing(registry_, name);
-      if (!service) continue;
-      auto& h = service->header();
-      RegistrySnapshot::Service v{name, h.request_type.describe(), h.reply_type.describe(), service->qos(), 0, {}, {},
-                                  h.served.load(), h.failed.load(), h.requests_in.load(), h.forwarded_in.load(),
-                                  h.replies_out.load(), h.forwarded_out.load()};
-      if (const auto server = h.server.load(); registry_->alive(server)) {
-        v.server_pid = registry_->pid_of(server);
-        v.server = registry_->name_of(server);
-      }
-      for (std::size_t c = 0; c < h.max_clients; ++c)
-        if (const auto owner = h.clients[c].owner.load(); registry_->alive(owner))
-          v.client_pids.push_back(registry_->pid_of(owner));
-      s.services.push_back(std::move(v));
-    }
-    return s;
-  }
+  [[nodiscard]] RegistrySnapshot registry() { return detail::snapshot(registry_); }
 
   // Reclaims what dead participants left behind: their registry entries,
   // their subscriber slots and the samples those held, their client slots
   // of services and the calls those had in flight. Publishers and idle
   // services also do this, and each participant does it on joining. Returns
   // the subscriber and client slots freed.
-  std::size_t reclaim() {
-    registry_->forget_dead_participants();
-    std::size_t freed = 0;
-    for (const auto& name : registry_->topics())
-      if (auto topic = detail::Topic::inspect(registry_, name)) freed += topic->reclaim_dead_subscribers();
-    for (const auto& name : registry_->names(detail::EndpointKind::service))
-      if (auto service = detail::Service::open_existing(registry_, name)) freed += service->reclaim_dead_clients();
-    return freed;
+  std::size_t reclaim() { return detail::reclaim(registry_); }
+
+  // For tools: reads topic `name` whatever its type, in the one subscriber
+  // slot each topic keeps for tools (so it takes no real subscriber's, and
+  // no `block` publisher ever waits for it). Views of it are raw bytes;
+  // hold them briefly. Throws Errc::not_found when there is no such topic.
+  [[nodiscard]] Reader<View<Bytes>> observe(const std::string& name) {
+    auto topic = detail::Topic::inspect(registry_, name);
+    if (!topic) throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + domain() + "'"}};
+    return Reader<View<Bytes>>{std::make_unique<SubscriptionReader<Bytes>>(std::move(topic), SubscribeQos{.spin = std::chrono::microseconds{0}}, runtime(), true)};
+  }
+
+  // For tools: publishes on topic `name` whatever its type, as raw bytes
+  // (the type's size, laid out as its description says). The topic must
+  // exist (its type is its own) and have no live publisher.
+  [[nodiscard]] Publisher<Bytes> raw_publisher(const std::string& name) {
+    auto topic = detail::Topic::inspect(registry_, name);
+    if (!topic) throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + domain() + "'"}};
+    return Publisher<Bytes>{std::move(topic), std::chrono::milliseconds{1000}, {}};
+  }
+
+  // For tools: a raw-byte handle on service `name`, whatever its types.
+  [[nodiscard]] ServiceChain<Bytes, Bytes> raw_chain(const std::string& name, ClientQos qos = {}) {
+    auto service = detail::Service::open_existing(registry_, name);
+    if (!service) throw Failure{{Errc::not_found, "no service '" + name + "' in shm domain '" + domain() + "'"}};
+    const auto& h = service->header();
+    auto binding = std::make_shared<detail::Binding>(registry_, name, h.request_type, h.reply_type, qos);
+    return {{std::move(binding)}, Graph::node(name, "service", "shm")};
   }
 
   [[nodiscard]] const std::string& domain() const noexcept { return registry_->domain(); }
@@ -302,7 +290,7 @@ class Core : public ErasedChainRuntime {
     if (topic && !(topic->header().type == type))
       throw Failure{{Errc::type_mismatch, "topic '" + name + "' carries " + topic->header().type.describe() +
                                               ", not " + type.describe()}};
-    if (!topic) topics_[name] = topic = detail::Topic::open(registry_, name, type, qos);
+    if (!topic) topics_[name] = topic = detail::Topic::open(registry_, name, type, qos, schema_of<T>());
     if (const auto have = topic->qos(); !detail::same_layout(have, qos))
       throw Failure{{Errc::qos_mismatch, "topic '" + name + "' exists with " + detail::describe(have) + "; this " +
                                              side + " asks for " + detail::describe(qos)}};
@@ -315,7 +303,8 @@ class Core : public ErasedChainRuntime {
   ServiceChain<Request, Reply> host(const std::string& name, const ServiceQos& qos, detail::Handler handler) {
     const detail::ServiceSpec spec{Fingerprint::of<Request>(), Fingerprint::of<Reply>(),
                                    detail::complete(name, Fingerprint::of<Request>(), std::is_same_v<Request, Bytes>,
-                                                    Fingerprint::of<Reply>(), std::is_same_v<Reply, Bytes>, qos)};
+                                                    Fingerprint::of<Reply>(), std::is_same_v<Reply, Bytes>, qos),
+                                   schema_of<Request>(), schema_of<Reply>()};
     auto service = detail::Service::open_to_serve(registry_, name, spec);
     auto server = std::make_shared<detail::Server>(std::move(service), spec.qos, std::move(handler),
                                                    [runtime = runtime()](Error e) {

@@ -24,6 +24,7 @@ struct RegistrySnapshot {
     std::string publisher;        // its participant name; empty: none alive
     std::vector<std::uint32_t> subscriber_pids;
     std::uint64_t published;  // sequences so far
+    std::string schema;       // its type's description (prime::schema_of)
   };
   struct Service {
     std::string name;
@@ -41,6 +42,8 @@ struct RegistrySnapshot {
     std::uint64_t requests_forwarded_in;
     std::uint64_t replies_to_callers;
     std::uint64_t outputs_forwarded_on;
+    std::string request_schema;  // the types' descriptions (prime::schema_of)
+    std::string reply_schema;
   };
   std::vector<Participant> participants;
   std::vector<Topic> topics;

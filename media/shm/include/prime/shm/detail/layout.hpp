@@ -3,6 +3,8 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
+#include <string>
 
 #include "prime/common/fingerprint.hpp"
 #include "prime/shm/detail/doorbell.hpp"
@@ -31,8 +33,10 @@ static_assert(std::atomic<std::uint32_t>::is_always_lock_free, "shared memory ne
 using ParticipantId = std::uint64_t;
 inline constexpr ParticipantId kReclaiming = ~0ull;  // a slot whose dead owner is being cleared
 
-inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d33ull;  // "PRIMESM3"
-inline constexpr std::uint32_t kLayoutVersion = 3;
+inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;  // "PRIMESM4"
+inline constexpr std::uint32_t kLayoutVersion = 4;
+// Room for a message type's description (prime::schema_of), for tools.
+inline constexpr std::size_t kSchemaCapacity = 2048;
 // Subscriber slots a topic may offer; one more is kept for tools that observe.
 inline constexpr std::size_t kMaxSubscribers = 61;
 inline constexpr std::size_t kSlots = kMaxSubscribers + 1;
@@ -102,6 +106,7 @@ struct TopicHeader {
   std::uint64_t max_held = 0;
   std::uint64_t ring_offset = 0;
   std::uint64_t chunks_offset = 0;
+  char schema[kSchemaCapacity]{};  // the message type's description; "?<size>" when it has none
 
   alignas(64) std::atomic<ParticipantId> publisher{0};
   std::atomic<std::int64_t> block_timeout_ns{0};  // the current publisher's
@@ -116,6 +121,15 @@ static_assert(offsetof(TopicHeader, publisher) % 64 == 0 && offsetof(TopicHeader
               "the lines publisher and subscribers write do not share with each other");
 
 inline constexpr std::size_t round_up(std::size_t n, std::size_t to) { return (n + to - 1) / to * to; }
+
+// Copies a type's description where it fits; one that does not is recorded
+// as its size only (tools then show bytes).
+template <std::size_t N>
+void write_schema(char (&to)[N], const std::string& schema, std::size_t size) {
+  const auto text = schema.size() < N ? schema : "?" + std::to_string(size);
+  std::memcpy(to, text.data(), text.size());
+  to[text.size()] = '\0';
+}
 
 // Where the parts of a topic's segment lie, from its QoS and message size.
 struct TopicGeometry {

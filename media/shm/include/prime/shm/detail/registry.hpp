@@ -79,6 +79,15 @@ class Registry : public std::enable_shared_from_this<Registry> {
       if (registry->enter(name)) return registry;
     }
   }
+  // The registry of `domain` seen from outside, joining nothing (no lease,
+  // no slot): for tools. Null when the domain does not exist.
+  static std::shared_ptr<Registry> watch(const std::string& domain) {
+    auto segment = Segment::open_existing(segment_name(domain, "registry", ""));
+    if (!segment || segment->size() < sizeof(RegistryLayout)) return nullptr;
+    const auto* r = std::launder(reinterpret_cast<const RegistryLayout*>(segment->data()));
+    if (r->magic.load(std::memory_order_acquire) != kRegistryMagic) return nullptr;
+    return std::shared_ptr<Registry>{new Registry{domain, std::move(*segment)}};
+  }
   Registry(const Registry&) = delete;
   Registry& operator=(const Registry&) = delete;
   ~Registry() { leave(); }
@@ -175,6 +184,23 @@ class Registry : public std::enable_shared_from_this<Registry> {
     return list;
   }
 
+  // When no participant of the domain lives: removes every segment of it
+  // and returns their names (a dead domain's remains); otherwise nothing.
+  std::vector<std::string> remove_if_dead() {
+    Locked lock{*this};
+    auto& r = layout();
+    if (std::any_of(std::begin(r.participants), std::end(r.participants), [this](const auto& p) { return alive(p.id.load()); }))
+      return {};
+    std::vector<std::string> removed;
+    for (auto& e : r.endpoints)
+      if (e.used) removed.push_back(segment_name(domain_, kind_name(e.kind), e.name));
+    for (auto& e : r.endpoints) forget(e);
+    r.magic.store(0);
+    removed.push_back(segment_.name());
+    Segment::remove(segment_.name());
+    return removed;
+  }
+
   // Forgets participants that died without leaving; returns them.
   std::size_t forget_dead_participants() {
     Locked lock{*this};
@@ -198,6 +224,9 @@ class Registry : public std::enable_shared_from_this<Registry> {
               auto* r = ::new (data) RegistryLayout{};
               r->magic.store(kRegistryMagic, std::memory_order_release);
             })} {}
+
+  Registry(std::string domain, Segment segment)
+      : domain_{std::move(domain)}, permissions_{0600}, pid_namespace_{own_pid_namespace()}, segment_{std::move(segment)} {}
 
   bool is_set_up(std::byte* data, std::size_t size) const {
     if (size < sizeof(std::uint64_t)) return false;

@@ -137,6 +137,20 @@ class Segment {
   bip::mapped_region region_;
 };
 
+// The text segment_name() escaped.
+inline std::string unescape(std::string_view text) {
+  std::string out;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    if (text[i] == '%' && i + 2 < text.size()) {
+      out.push_back(static_cast<char>(std::stoi(std::string{text.substr(i + 1, 2)}, nullptr, 16)));
+      i += 2;
+    } else {
+      out.push_back(text[i]);
+    }
+  }
+  return out;
+}
+
 // The segment name for `what` in `domain`: "prime.<domain>.<kind>.<what>",
 // with anything but [A-Za-z0-9_-] escaped (so "." only separates, and domain
 // "a.b" with topic "c" never meets domain "a" with topic "b.c"), and long

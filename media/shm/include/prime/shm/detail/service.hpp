@@ -25,6 +25,8 @@ struct ServiceSpec {
   Fingerprint request_type;
   Fingerprint reply_type;
   ServiceQos qos;  // complete: sizes and depths filled in
+  std::string request_schema{};
+  std::string reply_schema{};
 };
 
 // A service's segment mapped into this process: by its server, and by each
@@ -190,6 +192,8 @@ class Service {
     const auto& q = spec.qos;
     h->request_type = spec.request_type;
     h->reply_type = spec.reply_type;
+    write_schema(h->request_schema, spec.request_schema, spec.request_type.size);
+    write_schema(h->reply_schema, spec.reply_schema, spec.reply_type.size);
     h->max_request_size = q.max_request_size;
     h->max_reply_size = q.max_reply_size;
     h->max_clients = q.max_clients;

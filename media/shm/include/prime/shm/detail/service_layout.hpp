@@ -22,8 +22,8 @@ namespace prime::shm::detail {
 // Each cell's status word carries a ticket that changes whenever the cell
 // is freed, so an answer meant for a call that gave up never reaches a later one.
 
-inline constexpr std::uint64_t kServiceMagic = 0x5052494d45535631ull;  // "PRIMESV1"
-inline constexpr std::uint32_t kServiceLayout = 1;
+inline constexpr std::uint64_t kServiceMagic = 0x5052494d45535632ull;  // "PRIMESV2"
+inline constexpr std::uint32_t kServiceLayout = 2;
 inline constexpr std::size_t kMaxCells = 256;
 inline constexpr std::size_t kPendingWords = kMaxCells / 64;
 inline constexpr std::size_t kMaxServiceClients = 128;
@@ -83,6 +83,8 @@ struct ServiceHeader {
   std::atomic<std::uint32_t> workers{0};  // the current server's
   Fingerprint request_type{};
   Fingerprint reply_type{};
+  char request_schema[kSchemaCapacity]{};  // the types' descriptions, for tools
+  char reply_schema[kSchemaCapacity]{};
   std::uint64_t max_request_size = 0;
   std::uint64_t max_reply_size = 0;
   std::uint64_t max_clients = 0;

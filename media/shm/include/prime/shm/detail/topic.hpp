@@ -28,14 +28,15 @@ class Topic {
   // (Errc::no_space). Comparing QoS is the caller's. A new topic's first
   // sample is `first_sequence` (tests start near the ring's 2^40 wrap).
   static std::shared_ptr<Topic> open(std::shared_ptr<Registry> registry, const std::string& name,
-                                     const Fingerprint& type, const TopicQos& qos, std::uint64_t first_sequence = 0) {
+                                     const Fingerprint& type, const TopicQos& qos, const std::string& schema = {},
+                                     std::uint64_t first_sequence = 0) {
     const TopicGeometry geometry{qos.capacity, qos.max_message_size, qos.max_subscribers, qos.max_held};
     const auto what = "topic '" + name + "'";
     registry->add(EndpointKind::topic, name);
     auto segment = Segment::open(
         segment_name(registry->domain(), "topic", name), registry->permissions(), geometry.bytes(), what,
         [&](std::byte* data, std::size_t size) { return is_set_up(name, data, size); },
-        [&](std::byte* data, std::size_t) { set_up(data, type, qos, geometry, first_sequence); });
+        [&](std::byte* data, std::size_t) { set_up(data, type, qos, geometry, schema, first_sequence); });
     auto topic = std::shared_ptr<Topic>{new Topic{std::move(registry), name, std::move(segment)}};
     if (!(topic->header().type == type))
       throw Failure{{Errc::type_mismatch, what + " carries " + topic->header().type.describe() + ", not " + type.describe()}};
@@ -136,8 +137,9 @@ class Topic {
   }
 
   static void set_up(std::byte* data, const Fingerprint& type, const TopicQos& qos, const TopicGeometry& geometry,
-                     std::uint64_t first) {
+                     const std::string& schema, std::uint64_t first) {
     auto* header = ::new (data) TopicHeader{};
+    write_schema(header->schema, schema, type.size);
     header->overflow = static_cast<std::uint32_t>(qos.overflow);
     header->type = type;
     header->capacity = qos.capacity;

@@ -1,0 +1,83 @@
+// The planner process: sync pairs each scan with the odometry nearest its
+// stamp; a collector holds the newest pair; a 50 Hz control loop runs
+// localize | plan | control on it and calls the driver's service with the
+// command, stamped with the scan's time.
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <thread>
+#include <tuple>
+
+#include "messages.hpp"
+#include "prime/liberty.hpp"
+#include "prime/shm.hpp"
+#include "processes.hpp"
+
+namespace robot {
+
+using namespace std::chrono_literals;
+using Sensed = std::tuple<prime::shm::View<Scan>, prime::shm::View<Odometry>>;
+
+struct Pose {
+  double x, y, heading;
+  std::int64_t stamp_ns;
+};
+struct Path {
+  Pose from;
+  double goal_x, goal_y;
+};
+
+// Plain code, testable without Prime: walls give the position, odometry the heading.
+Pose localize(const Sensed& in) {
+  const auto& [scan, odom] = in;
+  const double x = (kRoom - scan->wall_distance[0] + scan->wall_distance[2]) / 2;
+  const double y = (kRoom - scan->wall_distance[1] + scan->wall_distance[3]) / 2;
+  return {x, y, odom->heading, scan.stamp().time_since_epoch().count()};
+}
+Path plan(const Pose& p) {  // drive a square: corner to corner
+  const double goal = (std::fmod(static_cast<double>(p.stamp_ns) / 1e9, 20.0) < 10.0) ? kRoom - 1 : 1;
+  return {p, goal, goal};
+}
+MotorCommand control(const Path& path) {
+  const double dx = path.goal_x - path.from.x, dy = path.goal_y - path.from.y;
+  const double distance = std::hypot(dx, dy);
+  double turn = std::atan2(dy, dx) - path.from.heading;
+  while (turn > std::numbers::pi) turn -= 2 * std::numbers::pi;
+  while (turn < -std::numbers::pi) turn += 2 * std::numbers::pi;
+  return {std::min(1.0, distance), 2 * turn, path.from.stamp_ns};
+}
+
+int planner(const std::string& domain, const std::atomic<bool>& stop) {
+  prime::shm::Core shm{domain, {.participant = "planner"}};
+  prime::liberty::Core local;
+  const prime::shm::TopicQos lidar_qos{.capacity = 16}, odom_qos{.capacity = 32};
+  auto sets = prime::sync(prime::approximate_time(10ms), shm.subscribe<Scan>("sensors/lidar", {}, lidar_qos),
+                          shm.subscribe<Odometry>("sensors/odom", {}, odom_qos));
+  auto newest = prime::collector(local, sets);
+  auto step = local.chain(localize, "localize") | local.chain(plan, "plan") | local.chain(control, "control");
+  auto motors = shm.chain<MotorCommand, Applied>("driver/command", {.timeout = 50ms, .wait_for_service = 5s});
+  std::uint64_t cycles = 0, sent = 0, waiting = 0;
+  auto last_print = prime::Clock::now();
+  for (auto next = prime::Clock::now(); !stop; next += 20ms) {  // the 50 Hz control loop
+    std::this_thread::sleep_until(next);
+    ++cycles;
+    try {
+      const auto command = step(newest(prime::Token{}));
+      if (auto applied = motors.call(command)) ++sent;
+      else std::printf("[planner] driver: %s\n", applied.error().describe().c_str());
+    } catch (const prime::Failure& f) {
+      if (f.error().code != prime::Errc::no_data) throw;
+      ++waiting;  // no synchronised pair yet
+    }
+    if (prime::Clock::now() - last_print >= 1s) {
+      std::printf("[planner] %llu cycles, %llu commands sent%s\n", static_cast<unsigned long long>(cycles),
+                  static_cast<unsigned long long>(sent), waiting ? " (waiting for the first synchronised pair)" : "");
+      std::fflush(stdout);
+      cycles = sent = waiting = 0;
+      last_print = prime::Clock::now();
+    }
+  }
+  return 0;
+}
+
+}  // namespace robot

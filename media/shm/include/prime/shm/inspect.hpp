@@ -1,0 +1,74 @@
+#pragma once
+
+#include <algorithm>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "prime/shm/detail/registry.hpp"
+#include "prime/shm/detail/segment.hpp"
+#include "prime/shm/detail/snapshot.hpp"
+#include "prime/shm/registry.hpp"
+
+namespace prime::shm {
+
+// Looking at shared-memory domains from outside, for tools: nothing here
+// joins a domain, takes a slot or makes anyone wait.
+
+// A domain on this machine and how alive it is.
+struct DomainSummary {
+  std::string name;
+  std::size_t participants_alive = 0;
+  std::size_t participants_dead = 0;  // listed, but their lease is gone
+  std::size_t topics = 0;
+  std::size_t services = 0;
+};
+
+// What domain `domain` holds now, or nothing when it does not exist.
+[[nodiscard]] inline std::optional<RegistrySnapshot> inspect(const std::string& domain) {
+  auto registry = detail::Registry::watch(domain);
+  if (!registry) return std::nullopt;
+  return detail::snapshot(registry);
+}
+
+// The domains whose registry lies in /dev/shm, alive or dead.
+[[nodiscard]] inline std::vector<DomainSummary> domains() {
+  std::vector<DomainSummary> found;
+  std::error_code ignored;
+  for (const auto& entry : std::filesystem::directory_iterator{detail::kShmDirectory, ignored}) {
+    const auto file = entry.path().filename().string();
+    const std::string suffix = ".registry.";
+    if (!file.starts_with("prime.") || !file.ends_with(suffix)) continue;
+    const auto domain = detail::unescape(file.substr(6, file.size() - 6 - suffix.size()));
+    auto snapshot = inspect(domain);
+    if (!snapshot) continue;
+    DomainSummary d{domain};
+    for (const auto& p : snapshot->participants) (p.alive ? d.participants_alive : d.participants_dead) += 1;
+    d.topics = snapshot->topics.size();
+    d.services = snapshot->services.size();
+    found.push_back(std::move(d));
+  }
+  std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
+  return found;
+}
+
+// What dead participants left in `domain`: of a domain no one lives in,
+// every segment (removed); of a live one, their registry entries and slots
+// (freed: nothing of a live participant is touched). Says what it did, a
+// line each; nothing when there was nothing to do.
+inline std::vector<std::string> clean(const std::string& domain) {
+  auto registry = detail::Registry::watch(domain);
+  if (!registry) return {};
+  std::vector<std::string> done;
+  for (auto& removed : registry->remove_if_dead()) done.push_back("removed /dev/shm/" + removed);
+  if (!done.empty()) return done;
+  const auto before = registry->participants();
+  const auto freed = detail::reclaim(registry);
+  for (const auto& p : before)
+    if (!p.alive) done.push_back("forgot dead participant '" + p.name + "' (pid " + std::to_string(p.pid) + ")");
+  if (freed > 0) done.push_back("freed " + std::to_string(freed) + " subscriber and client slots of dead participants");
+  return done;
+}
+
+}  // namespace prime::shm

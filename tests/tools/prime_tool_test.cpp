@@ -1,0 +1,238 @@
+// The prime tool against real processes: what it lists, measures, prints,
+// sends and cleans, and that observing never slows a publisher.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "json.hpp"
+#include "prime/shm.hpp"
+#include "shm/domain.hpp"
+#include "shm/messages.hpp"
+#include "shm/peer_process.hpp"
+
+namespace prime::test {
+namespace {
+
+using namespace std::chrono_literals;
+
+struct Run {
+  int code;
+  std::string out;
+};
+
+// `prime --domain <domain> <args...>`, to its end.
+Run prime(const std::string& domain, std::vector<std::string> args) {
+  args.insert(args.begin(), {PRIME_TOOL_PATH, "--domain", domain});
+  auto process = PeerProcess::command(std::move(args), true);
+  auto out = process.all_output();
+  return {process.exit_code().value_or(-1), out};
+}
+
+// The last line of `text` that starts with '{' or '[', as JSON.
+tool::Json last_json(const std::string& text) {
+  std::string last;
+  std::size_t at = 0;
+  while (at < text.size()) {
+    const auto nl = text.find('\n', at);
+    const auto line = text.substr(at, nl == std::string::npos ? std::string::npos : nl - at);
+    if (!line.empty() && (line[0] == '{' || line[0] == '[')) last = line;
+    at = nl == std::string::npos ? text.size() : nl + 1;
+  }
+  return tool::parse_json(last);
+}
+
+double number(const tool::Json& j, const std::string& key) { return std::get<double>(j.object().at(key).value); }
+std::string text(const tool::Json& j, const std::string& key) { return std::get<std::string>(j.object().at(key).value); }
+
+int segments_of(const std::string& domain) {
+  int n = 0;
+  for (const auto& e : std::filesystem::directory_iterator{"/dev/shm"})
+    n += e.path().filename().string().starts_with("prime." + domain + ".") ? 1 : 0;
+  return n;
+}
+
+TEST(PrimeTool, LsAndInfoShowATopicAndAServiceOfRunningPeersWithTypesAndPids) {
+  const auto domain = unique_domain("tool-ls");
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "100", "0"}};
+  PeerProcess server{{"serve", domain, "tool/echo", "echo"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  ASSERT_TRUE(server.says("serving"));
+  const auto ls = prime(domain, {"ls"});
+  EXPECT_EQ(ls.code, 0) << ls.out;
+  EXPECT_NE(ls.out.find("tool/ticks"), std::string::npos) << ls.out;
+  EXPECT_NE(ls.out.find("prime::test::Tick"), std::string::npos) << ls.out;
+  EXPECT_NE(ls.out.find("peer-ticks (" + std::to_string(ticks.pid()) + ")"), std::string::npos) << ls.out;
+  EXPECT_NE(ls.out.find("peer-serve (" + std::to_string(server.pid()) + ")"), std::string::npos) << ls.out;
+
+  const auto json = last_json(prime(domain, {"--json", "ls"}).out);
+  const auto& topics = json.object().at("topics").array();
+  ASSERT_EQ(topics.size(), 1u);
+  EXPECT_EQ(text(topics[0], "name"), "tool/ticks");
+  EXPECT_EQ(number(topics[0], "publisher_pid"), ticks.pid());
+  EXPECT_GT(number(topics[0], "rate"), 50) << "published at 100 Hz";
+  const auto& services = json.object().at("services").array();
+  ASSERT_EQ(services.size(), 1u);
+  EXPECT_NE(text(services[0], "request_type").find("prime::test::Ask"), std::string::npos);
+  EXPECT_EQ(number(services[0], "server_pid"), server.pid());
+
+  const auto info = prime(domain, {"info", "tool/echo"});
+  EXPECT_EQ(info.code, 0);
+  EXPECT_NE(info.out.find("request: prime::test::Ask (16 bytes"), std::string::npos) << info.out;
+  EXPECT_NE(info.out.find("server: peer-serve (pid " + std::to_string(server.pid()) + ")"), std::string::npos) << info.out;
+  EXPECT_NE(info.out.find("  who @0\n  n @8"), std::string::npos) << "its fields, by name: " << info.out;
+
+  const auto missing = prime(domain, {"info", "tool/nothing"});
+  EXPECT_EQ(missing.code, 3) << "not found";
+  EXPECT_NE(missing.out.find("no topic or service 'tool/nothing'"), std::string::npos) << missing.out;
+  const auto no_domain = prime(unique_domain("absent"), {"ls"});
+  EXPECT_EQ(no_domain.code, 3);
+  EXPECT_NE(no_domain.out.find("no shm domain"), std::string::npos) << no_domain.out;
+}
+
+TEST(PrimeTool, HzReportsAHundredHertzPublisherWithinTenPercent) {
+  const auto domain = unique_domain("tool-hz");
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "100", "0"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  const auto hz = prime(domain, {"--json", "hz", "tool/ticks", "--duration", "3"});
+  ASSERT_EQ(hz.code, 0) << hz.out;
+  const auto rate = number(last_json(hz.out), "rate");
+  EXPECT_GT(rate, 90) << hz.out;
+  EXPECT_LT(rate, 110) << hz.out;
+}
+
+TEST(PrimeTool, DelayReportsAKnownDelay) {
+  const auto domain = unique_domain("tool-delay");
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "100", "30"}};  // each stamped 30 ms before it is published
+  ASSERT_TRUE(ticks.says("publishing"));
+  const auto delay = prime(domain, {"--json", "delay", "tool/ticks", "--duration", "2"});
+  ASSERT_EQ(delay.code, 0) << delay.out;
+  const auto mean = number(last_json(delay.out), "mean");
+  EXPECT_GT(mean, 0.030) << delay.out;
+  EXPECT_LT(mean, 0.040) << delay.out;
+}
+
+TEST(PrimeTool, EchoPrintsADescribedTypeFieldByFieldAndAnUndescribedOneAsBytes) {
+  const auto domain = unique_domain("tool-echo");
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "100", "0"}};
+  PeerProcess raw{{"raw", domain, "tool/raw"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  ASSERT_TRUE(raw.says("ready"));
+  const auto described = prime(domain, {"echo", "tool/ticks", "-n", "1"});
+  EXPECT_EQ(described.code, 0);
+  EXPECT_NE(described.out.find("n: "), std::string::npos) << described.out;
+  EXPECT_NE(described.out.find("\nx: "), std::string::npos) << described.out;
+  EXPECT_NE(described.out.find("\ntag: \"t"), std::string::npos) << described.out;
+  const auto bytes = prime(domain, {"echo", "tool/raw", "-n", "1"});
+  EXPECT_EQ(bytes.code, 0);
+  EXPECT_NE(bytes.out.find("size: 16\nbytes: 88 77 66 55 44 33 22 11 2a 00 00 00 00 00 00 00"), std::string::npos) << bytes.out;
+  const auto json = last_json(prime(domain, {"--json", "echo", "tool/ticks", "-n", "1"}).out);
+  EXPECT_EQ(text(json.object().at("value"), "tag").substr(0, 1), "t");
+}
+
+TEST(PrimeTool, PubAndCallFromTheTerminalReachASubscriberAndAService) {
+  const auto domain = unique_domain("tool-pub");
+  PeerProcess listener{{"listen", domain, "tool/cmd"}};
+  PeerProcess server{{"serve", domain, "tool/echo", "echo"}};
+  ASSERT_TRUE(listener.says("listening"));
+  ASSERT_TRUE(server.says("serving"));
+  const auto pub = prime(domain, {"pub", "tool/cmd", "n=7", "x=1.5", "tag=hi"});
+  EXPECT_EQ(pub.code, 0) << pub.out;
+  EXPECT_TRUE(listener.says("tick 7 1.500000 hi")) << "the subscriber got what the terminal sent";
+  const auto json_pub = prime(domain, {"pub", "tool/cmd", R"({"n": 8, "tag": "json"})"});
+  EXPECT_EQ(json_pub.code, 0) << json_pub.out;
+  EXPECT_TRUE(listener.says("tick 8 0.000000 json"));
+  const auto call = prime(domain, {"call", "tool/echo", "who=5", "n=14"});
+  EXPECT_EQ(call.code, 0) << call.out;
+  EXPECT_EQ(call.out, "who: 5\nn: 42\n");
+  const auto wrong = prime(domain, {"pub", "tool/cmd", "speed=1"});
+  EXPECT_NE(wrong.code, 0);
+  EXPECT_NE(wrong.out.find("no field 'speed' (it has n, x, tag)"), std::string::npos) << wrong.out;
+}
+
+TEST(PrimeTool, GraphNamesEveryEdgeOfAThreeProcessSystem) {
+  const auto domain = unique_domain("tool-graph");
+  PeerProcess publisher{{"ticks", domain, "tool/ticks", "100", "0"}};
+  ASSERT_TRUE(publisher.says("publishing"));
+  PeerProcess subscriber{{"listen", domain, "tool/ticks"}};
+  PeerProcess server{{"serve", domain, "tool/echo", "echo"}};
+  ASSERT_TRUE(subscriber.says("listening"));
+  ASSERT_TRUE(server.says("serving"));
+  shm::Core client{domain, {.participant = "test"}};
+  auto echo = client.chain<Ask, Answer>("tool/echo");  // a client while it lives
+  ASSERT_TRUE(echo.call({1, 1}));
+  const auto graph = prime(domain, {"graph"});
+  ASSERT_EQ(graph.code, 0);
+  const auto p = [](auto pid) { return "\"pid" + std::to_string(pid) + "\""; };
+  for (const auto& edge : {p(publisher.pid()) + " -> \"topic:tool/ticks\" [label=\"publishes\"]",
+                           "\"topic:tool/ticks\" -> " + p(subscriber.pid()) + " [label=\"subscribes\"]",
+                           "\"service:tool/echo\" -> " + p(server.pid()) + " [label=\"served by\"]",
+                           p(::getpid()) + " -> \"service:tool/echo\" [label=\"calls\"]"})
+    EXPECT_NE(graph.out.find(edge), std::string::npos) << edge << " missing from\n" << graph.out;
+  EXPECT_EQ(graph.out.rfind("digraph prime {", 0), 0u);
+}
+
+TEST(PrimeTool, CleanRemovesAKilledDomainsSegmentsAndLeavesALiveOneAlone) {
+  const auto dead = unique_domain("tool-dead");
+  {
+    PeerProcess crashed{{"leave_segments", dead, "old"}};
+    ASSERT_TRUE(crashed.says("created"));
+    crashed.kill9();
+  }
+  ASSERT_EQ(segments_of(dead), 2);
+  const auto cleaned = prime(dead, {"clean"});
+  EXPECT_EQ(cleaned.code, 0);
+  EXPECT_NE(cleaned.out.find("removed /dev/shm/prime." + dead + ".topic.old"), std::string::npos) << cleaned.out;
+  EXPECT_EQ(segments_of(dead), 0) << "the dead domain is gone";
+
+  const auto live = unique_domain("tool-live");
+  PeerProcess alive{{"leave_segments", live, "current"}};
+  ASSERT_TRUE(alive.says("created"));
+  const auto kept = prime(live, {"clean"});
+  EXPECT_EQ(kept.code, 0);
+  EXPECT_NE(kept.out.find("nothing to clean"), std::string::npos) << kept.out;
+  EXPECT_EQ(segments_of(live), 2) << "a live participant's segments are never touched";
+}
+
+TEST(PrimeTool, ObservingABlockTopicNeverSlowsItsPublisher) {
+  const auto domain = unique_domain("tool-observe");
+  shm::Core core{domain};
+  const shm::TopicQos qos{.capacity = 64, .overflow = Overflow::block, .block_timeout = 10s};
+  auto publisher = core.publisher<Tick>("tool/fast", qos);
+  auto reader = core.subscribe<Tick>("tool/fast", {}, qos).subscribe();
+  std::uint64_t n = 0;
+  auto rate = [&] {  // messages per second, the best of 3 batches, read as fast as they come
+    double best = 0;
+    for (int b = 0; b < 3; ++b) {
+      const auto start = Clock::now();
+      for (int i = 0; i < 20000; ++i) {
+        EXPECT_TRUE(publisher.publish(Tick{n++, 0, {}}));
+        while (reader.try_read()) {
+        }
+      }
+      best = std::max(best, 20000 / std::chrono::duration<double>(Clock::now() - start).count());
+    }
+    return best;
+  };
+  const auto alone = rate();
+  // An echo whose output no one reads: it stops reading once its pipe is full.
+  auto echo = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "echo", "tool/fast"});
+  bool seen = false;
+  for (int i = 0; i < 1000 && !seen; ++i) {  // publish until the echo prints one
+    ASSERT_TRUE(publisher.publish(Tick{n++, 0, {}}));
+    while (reader.try_read()) {
+    }
+    seen = echo.line_starting("n: ", 10ms).has_value();
+  }
+  ASSERT_TRUE(seen) << "the echo reads the topic";
+  const auto observed = rate();
+  EXPECT_GT(observed, 0.5 * alone) << alone << " messages/s alone, " << observed << " observed by a stalled echo";
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
+}  // namespace
+}  // namespace prime::test

@@ -1,0 +1,120 @@
+// prime: see a running Prime system from a terminal, and drive it.
+//
+//   prime [--domain D | --redis URL] [--json] <command>
+//
+// Shm domains (the default; --domain, or PRIME_DOMAIN, or "robot") and
+// Optimus domains (--redis tcp://host:port, with --domain as the key prefix).
+// Exit codes: 0 done, 1 failed, 2 wrong usage, 3 no such domain, topic or
+// service, 4 nothing arrived in time, 5 Redis unreachable.
+#include <CLI/CLI.hpp>
+
+#include <csignal>
+#include <cstdlib>
+#include <exception>
+#include <functional>
+#include <iostream>
+#include <string>
+
+#include "prime/logic/error.hpp"
+#include "shm_commands.hpp"
+
+namespace {
+
+using namespace prime::tool;
+
+int exit_for(prime::Errc code) {
+  switch (code) {
+    case prime::Errc::not_found: return kNotFound;
+    case prime::Errc::timeout: return kNothing;
+    case prime::Errc::unreachable: return kUnreachable;
+    default: return kFailed;
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"prime: see a running Prime system — its processes, topics and services — and drive it"};
+  app.require_subcommand(1);
+  Options o;
+  if (const char* env = std::getenv("PRIME_DOMAIN"); env && *env) o.domain = env;
+  app.add_option("--domain", o.domain, "the domain (default: $PRIME_DOMAIN, or robot)");
+  app.add_option("--redis", o.redis, "look at an Optimus domain on this Redis server (tcp://host:port) instead");
+  app.add_flag("--json", o.json, "one JSON document (listings) or one per line (streams), for scripts");
+  std::function<int()> run;
+  const bool redis = [&] {
+    for (int i = 1; i < argc; ++i)
+      if (std::string{argv[i]}.starts_with("--redis")) return true;
+    return false;
+  }();
+
+  auto command = [&](const std::string& name, const std::string& help, std::function<int()> shm,
+                     std::function<int()> optimus = {}) {
+    auto* sub = app.add_subcommand(name, help);
+    sub->callback([&run, shm, optimus, name, redis] {
+      run = redis ? (optimus ? optimus : [name] {
+        std::cerr << "prime: " << name << " is for shared-memory domains\n";
+        return int{kUsage};
+      }) : shm;
+    });
+    return sub;
+  };
+  auto duration = [&](CLI::App* sub) {
+    sub->add_option("--duration", o.duration, "seconds to run (default: until Ctrl-C)");
+    sub->add_option("-n,--count", o.count, "stop after this many samples");
+    sub->add_option("--window", o.window, "samples the figures are taken over (default 100)");
+  };
+
+  command("domains", "the shared-memory domains on this machine", [&] { return shm_domains(o); });
+  command("ls", "participants, topics and services of the domain", [&] { return shm_ls(o); },
+          [&] { return optimus_ls(o); });
+  command("info", "one topic or service in full", [&] { return shm_info(o); }, [&] { return optimus_info(o); })
+      ->add_option("name", o.name, "the topic or service")
+      ->required();
+  auto* hz = command("hz", "a topic's rate: mean, min and max period, standard deviation", [&] { return shm_hz(o); },
+                     [&] { return optimus_watch(o, "hz"); });
+  hz->add_option("topic", o.name)->required();
+  duration(hz);
+  auto* bw = command("bw", "a topic's bandwidth, bytes per second", [&] { return shm_bw(o); },
+                     [&] { return optimus_watch(o, "bw"); });
+  bw->add_option("topic", o.name)->required();
+  duration(bw);
+  auto* delay = command("delay", "how old each sample is when it arrives, from its stamp (mean, p50, p99, max)",
+                        [&] { return shm_delay(o); }, [&] { return optimus_watch(o, "delay"); });
+  delay->add_option("topic", o.name)->required();
+  duration(delay);
+  auto* echo = command("echo", "a topic's samples, field by field", [&] { return shm_echo(o); },
+                       [&] { return optimus_watch(o, "echo"); });
+  echo->add_option("topic", o.name)->required();
+  echo->add_option("-n,--count", o.count, "stop after this many samples");
+  echo->add_option("--timeout", o.timeout, "seconds to wait for the first sample (default 5; 0: forever)");
+  auto* pub = command("pub", "publish a message built from JSON or field=value words", [&] { return shm_pub(o); });
+  pub->add_option("topic", o.name)->required();
+  pub->add_option("values", o.values, "{\"x\": 1} or x=1 y=2 pose.theta=0.5")->required();
+  pub->add_option("--rate", o.rate, "publish this many times a second until --count or Ctrl-C (default: once)");
+  pub->add_option("-n,--count", o.count, "with --rate: how many");
+  auto* call = command("call", "call a service with a request built from JSON or field=value words",
+                       [&] { return shm_call(o); });
+  call->add_option("service", o.name)->required();
+  call->add_option("values", o.values, "{\"x\": 1} or x=1 y=2")->required();
+  call->add_option("--timeout", o.timeout, "seconds to wait for the answer (default 5)");
+  command("graph", "the running system as Graphviz DOT", [&] { return shm_graph(o); }, [&] { return optimus_graph(o); });
+  command("clean", "remove what dead participants left; never touches a live one's", [&] { return shm_clean(o); })
+      ->add_flag("--all", o.all, "every domain on this machine, not only --domain");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : int{kUsage};
+  }
+  std::signal(SIGINT, [](int) { std::_Exit(kOk); });  // replaced by commands that want to finish their report
+  try {
+    return run();
+  } catch (const prime::Failure& f) {
+    std::cerr << "prime: " << f.error().message << '\n';
+    return exit_for(f.error().code);
+  } catch (const std::exception& e) {
+    std::cerr << "prime: " << e.what() << '\n';
+    return kFailed;
+  }
+}

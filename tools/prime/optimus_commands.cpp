@@ -1,0 +1,225 @@
+// `prime --redis URL` on Optimus domains: their sources (Redis streams) and
+// services, as the registry hashes of the domain list them.
+#include <hiredis/hiredis.h>
+
+#include <chrono>
+#include <csignal>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "json.hpp"
+#include "message_text.hpp"
+#include "prime/logic/error.hpp"
+#include "prime/logic/sample.hpp"
+#include "shm_commands.hpp"
+#include "stats.hpp"
+#include "table.hpp"
+
+namespace prime::tool {
+
+namespace {
+
+// One connection to the server, for the tool's few commands.
+class Redis {
+ public:
+  explicit Redis(const std::string& url) {
+    auto rest = url.starts_with("tcp://") ? url.substr(6) : url;
+    const auto colon = rest.rfind(':');
+    const auto host = colon == std::string::npos ? rest : rest.substr(0, colon);
+    const int port = colon == std::string::npos ? 6379 : std::stoi(rest.substr(colon + 1));
+    const timeval timeout{1, 0};
+    context_.reset(redisConnectWithTimeout(host.c_str(), port, timeout));
+    if (!context_ || context_->err)
+      throw Failure{{Errc::unreachable, "redis at " + url + " is unreachable" +
+                                            (context_ ? std::string{": "} + context_->errstr : std::string{})}};
+  }
+
+  // The reply to `words`, or a Failure naming what went wrong.
+  std::unique_ptr<redisReply, void (*)(void*)> command(const std::vector<std::string>& words) {
+    std::vector<const char*> argv;
+    std::vector<std::size_t> lengths;
+    for (const auto& w : words) {
+      argv.push_back(w.data());
+      lengths.push_back(w.size());
+    }
+    auto* reply = static_cast<redisReply*>(redisCommandArgv(context_.get(), static_cast<int>(argv.size()), argv.data(), lengths.data()));
+    if (!reply) throw Failure{{Errc::unreachable, "redis: " + std::string{context_->errstr}}};
+    if (reply->type == REDIS_REPLY_ERROR) {
+      std::string message{reply->str, reply->len};
+      freeReplyObject(reply);
+      throw Failure{{Errc::unreachable, "redis: " + message}};
+    }
+    return {reply, freeReplyObject};
+  }
+
+ private:
+  std::unique_ptr<redisContext, void (*)(redisContext*)> context_{nullptr, redisFree};
+};
+
+std::map<std::string, std::string> hash(Redis& r, const std::string& key) {
+  std::map<std::string, std::string> out;
+  auto reply = r.command({"HGETALL", key});
+  for (std::size_t i = 0; i + 1 < reply->elements; i += 2)
+    out[std::string{reply->element[i]->str, reply->element[i]->len}] = std::string{reply->element[i + 1]->str, reply->element[i + 1]->len};
+  return out;
+}
+
+long long integer(Redis& r, const std::vector<std::string>& words) {
+  auto reply = r.command(words);
+  return reply->type == REDIS_REPLY_INTEGER ? reply->integer : 0;
+}
+
+// "0123456789abcdef Pose (24 bytes, ...)" -> "Pose (24 bytes, ...)"
+std::string described(const std::string& record) {
+  const auto space = record.find(' ');
+  return space == std::string::npos ? record : record.substr(space + 1);
+}
+
+struct Endpoints {
+  std::map<std::string, std::string> sources, services;
+};
+
+Endpoints endpoints(Redis& r, const Options& o) {
+  return {hash(r, o.domain + ":registry:sources"), hash(r, o.domain + ":registry:services")};
+}
+
+}  // namespace
+
+int optimus_ls(const Options& o) {
+  Redis r{o.redis};
+  const auto e = endpoints(r, o);
+  if (e.sources.empty() && e.services.empty())
+    throw Failure{{Errc::not_found, "no Optimus domain '" + o.domain + "' on " + o.redis + " (no source or service registered)"}};
+  if (o.json) {
+    std::string out = "{\"domain\":" + quote(o.domain) + ",\"sources\":[";
+    bool first = true;
+    for (const auto& [name, record] : e.sources) {
+      out += std::string{first ? "" : ","} + "{\"name\":" + quote(name) + ",\"type\":" + quote(described(record)) +
+             ",\"length\":" + std::to_string(integer(r, {"XLEN", o.domain + ":src:" + name})) + ",\"readers\":" +
+             std::to_string(integer(r, {"HLEN", o.domain + ":readers:" + name})) + "}";
+      first = false;
+    }
+    out += "],\"services\":[";
+    first = true;
+    for (const auto& [name, record] : e.services) {
+      out += std::string{first ? "" : ","} + "{\"name\":" + quote(name) + ",\"types\":" + quote(described(record)) +
+             ",\"alive\":" + (integer(r, {"EXISTS", o.domain + ":svc:" + name + ":alive"}) ? "true" : "false") + "}";
+      first = false;
+    }
+    std::cout << out << "]}\n";
+    return kOk;
+  }
+  std::cout << "optimus domain " << o.domain << " on " << o.redis << "\n\nSOURCES\n";
+  Table sources{{"NAME", "TYPE", "IN STREAM", "READERS"}};
+  for (const auto& [name, record] : e.sources)
+    sources.add({name, described(record), std::to_string(integer(r, {"XLEN", o.domain + ":src:" + name})),
+                 std::to_string(integer(r, {"HLEN", o.domain + ":readers:" + name}))});
+  sources.print(std::cout);
+  std::cout << "\nSERVICES\n";
+  Table services{{"NAME", "TYPES", "ALIVE"}};
+  for (const auto& [name, record] : e.services)
+    services.add({name, described(record), integer(r, {"EXISTS", o.domain + ":svc:" + name + ":alive"}) ? "yes" : "no"});
+  services.print(std::cout);
+  return kOk;
+}
+
+int optimus_info(const Options& o) {
+  Redis r{o.redis};
+  const auto e = endpoints(r, o);
+  if (auto s = e.sources.find(o.name); s != e.sources.end()) {
+    std::cout << "source " << o.name << "\n  type: " << described(s->second) << "\n  stream: " << o.domain << ":src:" << o.name
+              << "\n  in stream: " << integer(r, {"XLEN", o.domain + ":src:" + o.name})
+              << "\n  readers: " << integer(r, {"HLEN", o.domain + ":readers:" + o.name}) << '\n';
+    return kOk;
+  }
+  if (auto v = e.services.find(o.name); v != e.services.end()) {
+    std::cout << "service " << o.name << "\n  types: " << described(v->second) << "\n  alive: "
+              << (integer(r, {"EXISTS", o.domain + ":svc:" + o.name + ":alive"}) ? "yes" : "no") << '\n';
+    return kOk;
+  }
+  throw Failure{{Errc::not_found, "no source or service '" + o.name + "' in Optimus domain '" + o.domain + "'"}};
+}
+
+int optimus_watch(const Options& o, const std::string& command) {
+  Redis r{o.redis};
+  const auto e = endpoints(r, o);
+  if (!e.sources.contains(o.name))
+    throw Failure{{Errc::not_found, "no source '" + o.name + "' in Optimus domain '" + o.domain + "'"}};
+  const auto stream = o.domain + ":src:" + o.name;
+  std::signal(SIGINT, [](int) { std::_Exit(kOk); });
+  std::string last = "$";
+  Window values{o.window};
+  std::optional<Clock::time_point> previous;
+  std::size_t seen = 0;
+  const auto start = Clock::now();
+  auto next_report = start + std::chrono::seconds{1};
+  auto report = [&] {
+    if (values.count() == 0) return;
+    if (command == "hz")
+      std::cout << (o.json ? "{\"topic\":" + quote(o.name) + ",\"rate\":" + std::to_string(1 / values.mean()) + "}"
+                           : "average rate: " + std::to_string(1 / values.mean()))
+                << std::endl;
+    else if (command == "bw")
+      std::cout << "average: " << values.mean() << " bytes per sample" << std::endl;
+    else if (command == "delay")
+      std::cout << "average delay: " << values.mean() << "s p99: " << values.percentile(0.99) << "s max: " << values.max()
+                << "s" << std::endl;
+  };
+  while ((o.count == 0 || seen < o.count) &&
+         (o.duration == 0 || Clock::now() - start < std::chrono::duration<double>(o.duration))) {
+    auto reply = r.command({"XREAD", "COUNT", "100", "BLOCK", "200", "STREAMS", stream, last});
+    if (reply->type == REDIS_REPLY_ARRAY && reply->elements > 0) {
+      const auto* entries = reply->element[0]->element[1];
+      for (std::size_t i = 0; i < entries->elements; ++i) {
+        const auto* entry = entries->element[i];
+        last = std::string{entry->element[0]->str, entry->element[0]->len};
+        std::map<std::string, std::string> fields;
+        for (std::size_t f = 0; f + 1 < entry->element[1]->elements; f += 2)
+          fields[entry->element[1]->element[f]->str] =
+              std::string{entry->element[1]->element[f + 1]->str, entry->element[1]->element[f + 1]->len};
+        ++seen;
+        const auto now = Clock::now();
+        const auto data = fields["d"];
+        if (command == "echo") {
+          const std::span<const std::byte> bytes{reinterpret_cast<const std::byte*>(data.data()), data.size()};
+          std::cout << "sequence: " << fields["n"] << "\nstamp: " << fields["t"] << " ns\nsize: " << data.size()
+                    << "\nbytes: " << hex(bytes) << "\n---" << std::endl;
+        } else if (command == "hz") {
+          if (previous) values.add(std::chrono::duration<double>(now - *previous).count());
+          previous = now;
+        } else if (command == "bw") {
+          values.add(static_cast<double>(data.size()));
+        } else {
+          const auto stamp = Clock::time_point{std::chrono::nanoseconds{std::stoll(fields["t"])}};
+          values.add(std::chrono::duration<double>(now - stamp).count());
+        }
+        if (o.count > 0 && seen >= o.count) break;
+      }
+    }
+    if (Clock::now() >= next_report) {
+      report();
+      next_report = Clock::now() + std::chrono::seconds{1};
+    }
+  }
+  report();
+  return seen > 0 ? int{kOk} : int{kNothing};
+}
+
+int optimus_graph(const Options& o) {
+  Redis r{o.redis};
+  const auto e = endpoints(r, o);
+  std::cout << "digraph prime {\n  rankdir=LR;\n  label=" << quote("optimus domain " + o.domain) << ";\n";
+  for (const auto& [name, record] : e.sources)
+    std::cout << "  " << quote("source:" + name) << " [shape=ellipse, label=" << quote(name + "\\n" + described(record)) << "];\n";
+  for (const auto& [name, record] : e.services)
+    std::cout << "  " << quote("service:" + name) << " [shape=hexagon, label=" << quote(name + "\\n" + described(record)) << "];\n";
+  std::cout << "}\n";
+  return kOk;
+}
+
+}  // namespace prime::tool

@@ -1,0 +1,475 @@
+// `prime` on shared-memory domains.
+#include "shm_commands.hpp"
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstring>
+#include <iomanip>
+#include <iostream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "json.hpp"
+#include "message_text.hpp"
+#include "prime/shm.hpp"
+#include "stats.hpp"
+#include "table.hpp"
+
+namespace prime::tool {
+
+namespace {
+
+using namespace std::chrono_literals;
+
+std::atomic<bool> stop_requested{false};
+
+// From now on Ctrl-C ends the command's loop instead of the process.
+void finish_on_ctrl_c() {
+  std::signal(SIGINT, [](int) { stop_requested = true; });
+}
+
+// "prime::test::Pose (32 bytes, align 8, layout 1)" -> "prime::test::Pose"
+std::string short_type(const std::string& described) { return described.substr(0, described.find(" (")); }
+
+std::string pids(const std::vector<std::uint32_t>& list) {
+  std::string out;
+  for (auto p : list) out += (out.empty() ? "" : ",") + std::to_string(p);
+  return out.empty() ? "-" : out;
+}
+
+std::string json_pids(const std::vector<std::uint32_t>& list) {
+  std::string out = "[";
+  for (std::size_t i = 0; i < list.size(); ++i) out += (i ? "," : "") + std::to_string(list[i]);
+  return out + "]";
+}
+
+std::string fixed(double v, int digits = 3) {
+  std::ostringstream out;
+  out << std::fixed << std::setprecision(digits) << v;
+  return out.str();
+}
+
+shm::RegistrySnapshot snapshot_of(const std::string& domain) {
+  auto seen = shm::inspect(domain);
+  if (!seen) throw Failure{{Errc::not_found, "no shm domain '" + domain + "' on this machine (prime domains lists them)"}};
+  return *seen;
+}
+
+const shm::RegistrySnapshot::Topic* find_topic(const shm::RegistrySnapshot& s, const std::string& name) {
+  for (const auto& t : s.topics)
+    if (t.name == name) return &t;
+  return nullptr;
+}
+const shm::RegistrySnapshot::Service* find_service(const shm::RegistrySnapshot& s, const std::string& name) {
+  for (const auto& v : s.services)
+    if (v.name == name) return &v;
+  return nullptr;
+}
+
+std::string overflow_name(Overflow o) { return o == Overflow::block ? "block" : "drop_oldest"; }
+
+std::string topic_json(const shm::RegistrySnapshot::Topic& t, double rate) {
+  return "{\"name\":" + quote(t.name) + ",\"type\":" + quote(t.type) + ",\"capacity\":" + std::to_string(t.qos.capacity) +
+         ",\"max_message_size\":" + std::to_string(t.qos.max_message_size) + ",\"overflow\":" +
+         quote(overflow_name(t.qos.overflow)) + ",\"max_subscribers\":" + std::to_string(t.qos.max_subscribers) +
+         ",\"max_held\":" + std::to_string(t.qos.max_held) + ",\"publisher_pid\":" + std::to_string(t.publisher_pid) +
+         ",\"publisher\":" + quote(t.publisher) + ",\"subscriber_pids\":" + json_pids(t.subscriber_pids) +
+         ",\"published\":" + std::to_string(t.published) + ",\"rate\":" + fixed(rate) + ",\"schema\":" + quote(t.schema) + "}";
+}
+
+std::string service_json(const shm::RegistrySnapshot::Service& v) {
+  return "{\"name\":" + quote(v.name) + ",\"request_type\":" + quote(v.request_type) + ",\"reply_type\":" +
+         quote(v.reply_type) + ",\"server_pid\":" + std::to_string(v.server_pid) + ",\"server\":" + quote(v.server) +
+         ",\"client_pids\":" + json_pids(v.client_pids) + ",\"served\":" + std::to_string(v.served) +
+         ",\"failed\":" + std::to_string(v.failed) + ",\"workers\":" + std::to_string(v.qos.workers) +
+         ",\"timeout_ms\":" + std::to_string(v.qos.timeout.count()) + ",\"max_clients\":" +
+         std::to_string(v.qos.max_clients) + ",\"request_schema\":" + quote(v.request_schema) +
+         ",\"reply_schema\":" + quote(v.reply_schema) + "}";
+}
+
+// A topic read by this tool in the slot each topic keeps for tools.
+struct Watch {
+  shm::Core core;
+  Reader<shm::View<shm::Bytes>> reader;
+  std::string schema;
+
+  Watch(const Options& o, const std::string& command)
+      : core{check(o.domain), {.participant = "prime " + command}}, reader{core.observe(o.name)} {
+    for (const auto& t : core.registry().topics)
+      if (t.name == o.name) schema = t.schema;
+  }
+  static std::string check(const std::string& domain) {
+    snapshot_of(domain);  // a domain that is not there is an error, not one this tool starts
+    return domain;
+  }
+};
+
+// Reads samples until the duration, the count or Ctrl-C; `on_sample` gets
+// each, `report` runs every second and at the end.
+template <class OnSample, class Report>
+int watch_loop(const Options& o, Watch& w, OnSample on_sample, Report report) {
+  finish_on_ctrl_c();
+  const auto start = Clock::now();
+  const auto end = o.duration > 0 ? start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration))
+                                  : Clock::time_point::max();
+  auto next_report = start + 1s;
+  std::size_t seen = 0, reported = 0;
+  while (!stop_requested && Clock::now() < end && (o.count == 0 || seen < o.count)) {
+    auto sample = w.reader.read_for(std::min<Clock::duration>(100ms, end - Clock::now()));
+    const auto now = Clock::now();
+    if (sample) {
+      ++seen;
+      on_sample(*sample, now);
+    }
+    if (now >= next_report) {
+      report(false);
+      reported = seen;
+      next_report = now + 1s;
+    }
+  }
+  if (seen != reported) report(true);  // what came since the last report
+  return seen > 0 ? int{kOk} : int{kNothing};
+}
+
+}  // namespace
+
+bool interrupted() { return stop_requested; }
+
+int shm_domains(const Options& o) {
+  const auto found = shm::domains();
+  if (o.json) {
+    std::string out = "[";
+    for (std::size_t i = 0; i < found.size(); ++i) {
+      const auto& d = found[i];
+      out += std::string{i ? "," : ""} + "{\"name\":" + quote(d.name) + ",\"participants_alive\":" +
+             std::to_string(d.participants_alive) + ",\"participants_dead\":" + std::to_string(d.participants_dead) +
+             ",\"topics\":" + std::to_string(d.topics) + ",\"services\":" + std::to_string(d.services) + "}";
+    }
+    std::cout << out << "]\n";
+    return kOk;
+  }
+  Table table{{"DOMAIN", "ALIVE", "DEAD", "TOPICS", "SERVICES"}};
+  for (const auto& d : found)
+    table.add({d.name, std::to_string(d.participants_alive), std::to_string(d.participants_dead), std::to_string(d.topics),
+               std::to_string(d.services)});
+  if (table.empty()) std::cout << "no shared-memory domains on this machine\n";
+  else table.print(std::cout);
+  return kOk;
+}
+
+int shm_ls(const Options& o) {
+  const auto first = snapshot_of(o.domain);
+  const auto t0 = Clock::now();
+  std::this_thread::sleep_for(200ms);  // the rates: samples published over this time
+  const auto second = snapshot_of(o.domain);
+  const auto seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  auto rate = [&](const shm::RegistrySnapshot::Topic& t) {
+    const auto* before = find_topic(first, t.name);
+    return before ? static_cast<double>(t.published - before->published) / seconds : 0.0;
+  };
+  if (o.json) {
+    std::string out = "{\"domain\":" + quote(o.domain) + ",\"participants\":[";
+    for (std::size_t i = 0; i < second.participants.size(); ++i) {
+      const auto& p = second.participants[i];
+      out += std::string{i ? "," : ""} + "{\"name\":" + quote(p.name) + ",\"pid\":" + std::to_string(p.pid) +
+             ",\"alive\":" + (p.alive ? "true" : "false") + "}";
+    }
+    out += "],\"topics\":[";
+    for (std::size_t i = 0; i < second.topics.size(); ++i) out += (i ? "," : "") + topic_json(second.topics[i], rate(second.topics[i]));
+    out += "],\"services\":[";
+    for (std::size_t i = 0; i < second.services.size(); ++i) out += (i ? "," : "") + service_json(second.services[i]);
+    std::cout << out << "]}\n";
+    return kOk;
+  }
+  std::cout << "domain " << o.domain << "\n\nPARTICIPANTS\n";
+  Table participants{{"NAME", "PID", "ALIVE"}};
+  for (const auto& p : second.participants) participants.add({p.name, std::to_string(p.pid), p.alive ? "yes" : "no"});
+  participants.print(std::cout);
+  std::cout << "\nTOPICS\n";
+  Table topics{{"NAME", "TYPE", "QOS", "PUBLISHER", "SUBSCRIBERS", "PUBLISHED", "RATE"}};
+  for (const auto& t : second.topics)
+    topics.add({t.name, short_type(t.type), std::to_string(t.qos.capacity) + " " + overflow_name(t.qos.overflow),
+                t.publisher_pid ? t.publisher + " (" + std::to_string(t.publisher_pid) + ")" : "-", pids(t.subscriber_pids),
+                std::to_string(t.published), fixed(rate(t), 1) + " Hz"});
+  topics.print(std::cout);
+  std::cout << "\nSERVICES\n";
+  Table services{{"NAME", "REQUEST", "REPLY", "SERVER", "CLIENTS", "CALLS", "FAILED"}};
+  for (const auto& v : second.services)
+    services.add({v.name, short_type(v.request_type), short_type(v.reply_type),
+                  v.server_pid ? v.server + " (" + std::to_string(v.server_pid) + ")" : "-", pids(v.client_pids),
+                  std::to_string(v.served), std::to_string(v.failed)});
+  services.print(std::cout);
+  return kOk;
+}
+
+int shm_info(const Options& o) {
+  const auto s = snapshot_of(o.domain);
+  auto fields = [](const std::string& schema) {
+    std::ostringstream out;
+    try {
+      const auto layout = parse_layout(schema);
+      if (layout->kind != Layout::Kind::record) return std::string{"  (no description: PRIME_DESCRIBE it to see fields)\n"};
+      for (const auto& f : layout->fields) out << "  " << f.name << " @" << f.offset << "\n";
+    } catch (const std::exception& e) {
+      out << "  (" << e.what() << ")\n";
+    }
+    return out.str();
+  };
+  if (const auto* t = find_topic(s, o.name)) {
+    if (o.json) {
+      std::cout << topic_json(*t, 0) << '\n';
+      return kOk;
+    }
+    std::cout << "topic " << t->name << "\n  type: " << t->type << "\n  capacity: " << t->qos.capacity
+              << "\n  max_message_size: " << t->qos.max_message_size << "\n  overflow: " << overflow_name(t->qos.overflow)
+              << "\n  block_timeout: " << t->qos.block_timeout.count() << " ms\n  max_subscribers: " << t->qos.max_subscribers
+              << "\n  max_held: " << t->qos.max_held << "\n  publisher: " << (t->publisher_pid ? t->publisher + " (pid " + std::to_string(t->publisher_pid) + ")" : "none")
+              << "\n  subscribers: " << pids(t->subscriber_pids) << "\n  published: " << t->published << "\nfields\n"
+              << fields(t->schema);
+    return kOk;
+  }
+  if (const auto* v = find_service(s, o.name)) {
+    if (o.json) {
+      std::cout << service_json(*v) << '\n';
+      return kOk;
+    }
+    std::cout << "service " << v->name << "\n  request: " << v->request_type << "\n  reply: " << v->reply_type
+              << "\n  server: " << (v->server_pid ? v->server + " (pid " + std::to_string(v->server_pid) + ")" : "none")
+              << "\n  workers: " << v->qos.workers << "\n  timeout: " << v->qos.timeout.count()
+              << " ms\n  max_clients: " << v->qos.max_clients << "\n  calls_per_client: " << v->qos.calls_per_client
+              << "\n  clients: " << pids(v->client_pids) << "\n  served: " << v->served << "\n  failed: " << v->failed
+              << "\n  from callers: " << v->requests_from_callers << ", forwarded in: " << v->requests_forwarded_in
+              << "\n  to callers: " << v->replies_to_callers << ", forwarded on: " << v->outputs_forwarded_on
+              << "\nrequest fields\n" << fields(v->request_schema) << "reply fields\n" << fields(v->reply_schema);
+    return kOk;
+  }
+  throw Failure{{Errc::not_found, "no topic or service '" + o.name + "' in shm domain '" + o.domain + "'"}};
+}
+
+int shm_hz(const Options& o) {
+  Watch w{o, "hz"};
+  Window periods{o.window};
+  std::optional<Clock::time_point> last;
+  return watch_loop(
+      o, w,
+      [&](auto&, Clock::time_point now) {
+        if (last) periods.add(std::chrono::duration<double>(now - *last).count());
+        last = now;
+      },
+      [&](bool) {
+        if (periods.count() == 0) return;
+        const auto rate = 1 / periods.mean();
+        if (o.json)
+          std::cout << "{\"topic\":" << quote(o.name) << ",\"rate\":" << fixed(rate) << ",\"min\":" << fixed(periods.min(), 6)
+                    << ",\"max\":" << fixed(periods.max(), 6) << ",\"stddev\":" << fixed(periods.stddev(), 6)
+                    << ",\"window\":" << periods.count() << "}" << std::endl;
+        else
+          std::cout << "average rate: " << fixed(rate) << "\n\tmin: " << fixed(periods.min(), 6) << "s max: "
+                    << fixed(periods.max(), 6) << "s std dev: " << fixed(periods.stddev(), 6)
+                    << "s window: " << periods.count() << std::endl;
+      });
+}
+
+int shm_bw(const Options& o) {
+  Watch w{o, "bw"};
+  Window sizes{o.window};
+  Window times{o.window};
+  return watch_loop(
+      o, w,
+      [&](auto& sample, Clock::time_point now) {
+        sizes.add(static_cast<double>(sample.value.bytes().size()));
+        times.add(std::chrono::duration<double>(now.time_since_epoch()).count());
+      },
+      [&](bool) {
+        if (times.count() < 2) return;
+        const auto span = times.max() - times.min();
+        const auto rate = span > 0 ? sizes.mean() * static_cast<double>(times.count() - 1) / span : 0;
+        if (o.json)
+          std::cout << "{\"topic\":" << quote(o.name) << ",\"bytes_per_second\":" << fixed(rate, 1)
+                    << ",\"mean_size\":" << fixed(sizes.mean(), 1) << ",\"window\":" << times.count() << "}" << std::endl;
+        else
+          std::cout << "average: " << fixed(rate / 1024, 2) << " KiB/s\n\tmean size: " << fixed(sizes.mean(), 0)
+                    << " B min: " << sizes.min() << " B max: " << sizes.max() << " B window: " << times.count() << std::endl;
+      });
+}
+
+int shm_delay(const Options& o) {
+  Watch w{o, "delay"};
+  Window ages{o.window};
+  return watch_loop(
+      o, w, [&](auto& sample, Clock::time_point now) { ages.add(std::chrono::duration<double>(now - sample.stamp).count()); },
+      [&](bool) {
+        if (ages.count() == 0) return;
+        if (o.json)
+          std::cout << "{\"topic\":" << quote(o.name) << ",\"mean\":" << fixed(ages.mean(), 6) << ",\"p50\":"
+                    << fixed(ages.percentile(0.5), 6) << ",\"p99\":" << fixed(ages.percentile(0.99), 6)
+                    << ",\"max\":" << fixed(ages.max(), 6) << ",\"window\":" << ages.count() << "}" << std::endl;
+        else
+          std::cout << "average delay: " << fixed(ages.mean(), 6) << "s\n\tp50: " << fixed(ages.percentile(0.5), 6)
+                    << "s p99: " << fixed(ages.percentile(0.99), 6) << "s max: " << fixed(ages.max(), 6)
+                    << "s window: " << ages.count() << std::endl;
+      });
+}
+
+int shm_echo(const Options& o) {
+  Watch w{o, "echo"};
+  std::shared_ptr<const Layout> layout;
+  try {
+    layout = parse_layout(w.schema);
+  } catch (const std::exception&) {
+  }
+  const bool described = layout && layout->kind != Layout::Kind::opaque;
+  finish_on_ctrl_c();
+  std::size_t seen = 0;
+  const auto first_by = o.timeout > 0 ? Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.timeout))
+                                      : Clock::time_point::max();
+  while (!stop_requested && (o.count == 0 || seen < o.count)) {
+    auto sample = w.reader.read_for(100ms);
+    if (!sample) {
+      if (seen == 0 && Clock::now() >= first_by) {
+        std::cerr << "prime: nothing published on '" << o.name << "' within " << o.timeout << " s\n";
+        return kNothing;
+      }
+      continue;
+    }
+    ++seen;
+    const auto bytes = sample->value.bytes();
+    const auto stamp_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(sample->stamp.time_since_epoch()).count();
+    if (o.json) {
+      std::cout << "{\"sequence\":" << sample->value.sequence() << ",\"stamp_ns\":" << stamp_ns << ",\"size\":" << bytes.size()
+                << (described ? ",\"value\":" + to_json(*layout, bytes.data()) : ",\"bytes\":" + quote(hex(bytes, bytes.size())))
+                << "}" << std::endl;
+    } else if (described) {
+      if (layout->kind == Layout::Kind::record) print_fields(std::cout, *layout, bytes.data());
+      else std::cout << "value: " << to_json(*layout, bytes.data()) << '\n';
+      std::cout << "---" << std::endl;
+    } else {
+      std::cout << "sequence: " << sample->value.sequence() << "\nstamp: " << stamp_ns << " ns\nsize: " << bytes.size()
+                << "\nbytes: " << hex(bytes) << "\n---" << std::endl;
+    }
+  }
+  return seen > 0 ? int{kOk} : int{kNothing};
+}
+
+namespace {
+
+// The message `words` say (one JSON object, or field=value words), laid out
+// as `schema` describes in `size` bytes, the rest zero.
+std::vector<std::byte> build(const std::string& schema, std::size_t size, const std::vector<std::string>& words) {
+  const auto layout = parse_layout(schema);
+  if (layout->kind != Layout::Kind::record)
+    throw Failure{{Errc::type_mismatch, "its type has no description (PRIME_DESCRIBE next to the type): it cannot be built from text"}};
+  const auto value = words.size() == 1 && !words[0].empty() && words[0][0] == '{' ? parse_json(words[0]) : from_assignments(words);
+  std::vector<std::byte> bytes(size);
+  fill(*layout, bytes.data(), value);
+  return bytes;
+}
+
+}  // namespace
+
+int shm_pub(const Options& o) {
+  const auto s = snapshot_of(o.domain);
+  const auto* t = find_topic(s, o.name);
+  if (!t) throw Failure{{Errc::not_found, "no topic '" + o.name + "' in shm domain '" + o.domain + "' (its type comes from a publisher or subscriber)"}};
+  const auto bytes = build(t->schema, t->qos.max_message_size, o.values);
+  shm::Core core{o.domain, {.participant = "prime pub"}};
+  auto publisher = core.raw_publisher(o.name);
+  finish_on_ctrl_c();
+  const auto period = o.rate > 0 ? std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1 / o.rate)) : Clock::duration::zero();
+  std::size_t sent = 0;
+  for (auto next = Clock::now(); !stop_requested; next += period) {
+    std::this_thread::sleep_until(next);
+    if (auto done = publisher.publish(bytes); !done) throw Failure{done.error()};
+    ++sent;
+    if (o.rate == 0 || (o.count > 0 && sent >= o.count)) break;
+  }
+  if (!o.json) std::cout << "published " << sent << (sent == 1 ? " sample" : " samples") << " on '" << o.name << "'\n";
+  return kOk;
+}
+
+int shm_call(const Options& o) {
+  const auto s = snapshot_of(o.domain);
+  const auto* v = find_service(s, o.name);
+  if (!v) throw Failure{{Errc::not_found, "no service '" + o.name + "' in shm domain '" + o.domain + "'"}};
+  const auto request = build(v->request_schema, v->qos.max_request_size, o.values);
+  shm::Core core{o.domain, {.participant = "prime call"}};
+  auto service = core.raw_chain(o.name, {.timeout = std::chrono::milliseconds{static_cast<long>(o.timeout * 1000)}});
+  std::vector<std::byte> reply;
+  auto done = service.call_in_place(
+      [&](std::span<std::byte> to) {
+        std::memcpy(to.data(), request.data(), request.size());
+        return request.size();
+      },
+      [&](std::span<const std::byte> from) { reply.assign(from.begin(), from.end()); });
+  if (!done) throw Failure{done.error()};
+  std::shared_ptr<const Layout> layout;
+  try {
+    layout = parse_layout(v->reply_schema);
+  } catch (const std::exception&) {
+  }
+  if (o.json) {
+    std::cout << (layout && layout->kind != Layout::Kind::opaque ? to_json(*layout, reply.data()) : quote(hex(reply, reply.size())))
+              << '\n';
+  } else if (layout && layout->kind == Layout::Kind::record) {
+    print_fields(std::cout, *layout, reply.data());
+  } else if (layout && layout->kind != Layout::Kind::opaque) {
+    std::cout << to_json(*layout, reply.data()) << '\n';
+  } else {
+    std::cout << "bytes: " << hex(reply) << '\n';
+  }
+  return kOk;
+}
+
+int shm_graph(const Options& o) {
+  const auto s = snapshot_of(o.domain);
+  std::map<std::uint32_t, std::string> processes;  // pid -> the participants it runs
+  for (const auto& p : s.participants)
+    if (p.alive) processes[p.pid] += (processes[p.pid].empty() ? "" : ", ") + p.name;
+  std::ostringstream out;
+  out << "digraph prime {\n  rankdir=LR;\n  label=" << quote("shm domain " + o.domain) << ";\n";
+  for (const auto& [pid, names] : processes)
+    out << "  \"pid" << pid << "\" [shape=box, label=" << quote(names + "\\npid " + std::to_string(pid)) << "];\n";
+  for (const auto& t : s.topics) {
+    out << "  " << quote("topic:" + t.name) << " [shape=ellipse, label=" << quote(t.name + "\\n" + short_type(t.type)) << "];\n";
+    if (t.publisher_pid) out << "  \"pid" << t.publisher_pid << "\" -> " << quote("topic:" + t.name) << " [label=\"publishes\"];\n";
+    for (const auto pid : std::set<std::uint32_t>(t.subscriber_pids.begin(), t.subscriber_pids.end()))
+      out << "  " << quote("topic:" + t.name) << " -> \"pid" << pid << "\" [label=\"subscribes\"];\n";
+  }
+  for (const auto& v : s.services) {
+    out << "  " << quote("service:" + v.name) << " [shape=hexagon, label="
+        << quote(v.name + "\\n" + short_type(v.request_type) + " -> " + short_type(v.reply_type)) << "];\n";
+    if (v.server_pid) out << "  " << quote("service:" + v.name) << " -> \"pid" << v.server_pid << "\" [label=\"served by\"];\n";
+    for (const auto pid : std::set<std::uint32_t>(v.client_pids.begin(), v.client_pids.end()))
+      out << "  \"pid" << pid << "\" -> " << quote("service:" + v.name) << " [label=\"calls\"];\n";
+  }
+  out << "}\n";
+  std::cout << out.str();
+  return kOk;
+}
+
+int shm_clean(const Options& o) {
+  std::vector<std::string> domains;
+  if (o.all) {
+    for (const auto& d : shm::domains()) domains.push_back(d.name);
+  } else {
+    snapshot_of(o.domain);
+    domains.push_back(o.domain);
+  }
+  std::size_t actions = 0;
+  std::string json = "[";
+  for (const auto& d : domains) {
+    for (const auto& line : shm::clean(d)) {
+      ++actions;
+      if (o.json) json += (json.size() > 1 ? "," : "") + std::string{"{\"domain\":"} + quote(d) + ",\"done\":" + quote(line) + "}";
+      else std::cout << d << ": " << line << '\n';
+    }
+  }
+  if (o.json) std::cout << json << "]\n";
+  else if (actions == 0) std::cout << "nothing to clean: no dead participant left anything\n";
+  return kOk;
+}
+
+}  // namespace prime::tool

@@ -1,0 +1,48 @@
+#pragma once
+
+// `prime` on a shared-memory domain: what it lists, measures, prints and sends.
+
+#include <string>
+#include <vector>
+
+namespace prime::tool {
+
+// What every command is given.
+struct Options {
+  std::string domain = "robot";
+  std::string redis;  // an Optimus domain on this server instead
+  bool json = false;
+  std::string name;                 // the topic or service
+  std::vector<std::string> values;  // pub, call: JSON or field=value words
+  std::size_t count = 0;            // echo -n, hz/delay: stop after so many samples (0: no limit)
+  double duration = 0;              // seconds to run (0: until Ctrl-C)
+  std::size_t window = 100;         // samples hz, bw and delay look at
+  double rate = 0;                  // pub: samples per second (0: once)
+  double timeout = 5;               // call: seconds; echo: how long to wait for a first sample
+  bool all = false;                 // clean: every domain
+};
+
+// What a command's exit code says.
+enum Exit : int { kOk = 0, kFailed = 1, kUsage = 2, kNotFound = 3, kNothing = 4, kUnreachable = 5 };
+
+int shm_domains(const Options& o);
+int shm_ls(const Options& o);
+int shm_info(const Options& o);
+int shm_hz(const Options& o);
+int shm_bw(const Options& o);
+int shm_delay(const Options& o);
+int shm_echo(const Options& o);
+int shm_pub(const Options& o);
+int shm_call(const Options& o);
+int shm_graph(const Options& o);
+int shm_clean(const Options& o);
+
+int optimus_ls(const Options& o);
+int optimus_info(const Options& o);
+int optimus_watch(const Options& o, const std::string& command);  // hz, bw, delay, echo on a source
+int optimus_graph(const Options& o);
+
+// Set by Ctrl-C: long-running commands end at once, printing what they have.
+bool interrupted();
+
+}  // namespace prime::tool
