@@ -12,15 +12,15 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
 awk -v out="$work" '
-  /^<!-- compiles with tests\/readme\/[A-Za-z0-9_.]+ -->$/ { prologue = $4; sub(/.*\//, "", prologue); next }
-  /^```cpp$/ {
+  /^ *<!-- compiles with tests\/readme\/[A-Za-z0-9_.]+ -->$/ { prologue = $4; sub(/.*\//, "", prologue); next }
+  /^ *```cpp$/ {
     n++; file = out "/block" n ".cpp"
     if (prologue == "") { print "README block " n " (line " NR ") has no \"<!-- compiles with ... -->\" line" > "/dev/stderr"; bad = 1 }
     else print "#include \"" prologue "\"" > file
     printf "#line %d \"README.md\"\n", NR + 1 > file
     inside = 1; prologue = ""; next
   }
-  /^```$/ && inside { inside = 0; close(file); next }
+  /^ *```$/ && inside { inside = 0; close(file); next }
   inside { print > file }
   END { if (n == 0) { print "no C++ block found in the README" > "/dev/stderr"; bad = 1 } exit bad }
 ' "$readme"
