@@ -10,6 +10,8 @@
 #include <vector>
 
 #include "json.hpp"
+#include "optimus/support/redis_server.hpp"
+#include "prime/optimus.hpp"
 #include "prime/shm.hpp"
 #include "shm/domain.hpp"
 #include "shm/messages.hpp"
@@ -232,6 +234,37 @@ TEST(PrimeTool, ObservingABlockTopicNeverSlowsItsPublisher) {
   const auto observed = rate();
   EXPECT_GT(observed, 0.5 * alone) << alone << " messages/s alone, " << observed << " observed by a stalled echo";
   EXPECT_EQ(reader.lost(), 0u);
+}
+
+TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndHzMeasuresASource) {
+  RedisServer server;
+  const auto domain = unique_domain("tool-optimus");
+  optimus::Core core{optimus::Options{.url = server.url(), .domain = domain}};
+  auto doubled = core.serve("double", [](int x) { return 2 * x; });
+  auto ticks = core.publisher<int>("ticks");
+  const auto ls = prime(domain, {"--redis", server.url(), "ls"});
+  EXPECT_EQ(ls.code, 0) << ls.out;
+  EXPECT_NE(ls.out.find("ticks"), std::string::npos) << ls.out;
+  EXPECT_NE(ls.out.find("double"), std::string::npos) << ls.out;
+  EXPECT_NE(ls.out.find("int (4 bytes"), std::string::npos) << ls.out;
+  const auto json = last_json(prime(domain, {"--redis", server.url(), "--json", "ls"}).out);
+  EXPECT_EQ(text(json.object().at("sources").array().at(0), "name"), "ticks");
+  EXPECT_EQ(json.object().at("services").array().at(0).object().at("alive").value, tool::Json{true}.value);
+
+  auto hz = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "--redis", server.url(), "--json", "hz", "ticks",
+                                  "--duration", "2"},
+                                 true);
+  for (auto next = Clock::now(), end = next + 2500ms; next < end; next += 10ms) {  // 100 Hz
+    std::this_thread::sleep_until(next);
+    ASSERT_TRUE(ticks.publish(1));
+  }
+  const auto rate = number(last_json(hz.all_output()), "rate");
+  EXPECT_GT(rate, 70) << "a 100 Hz source (over Redis, on a busy machine)";
+  EXPECT_LT(rate, 130);
+
+  const auto unreachable = prime(domain, {"--redis", "tcp://127.0.0.1:1", "ls"});
+  EXPECT_EQ(unreachable.code, 5);
+  EXPECT_NE(unreachable.out.find("unreachable"), std::string::npos) << unreachable.out;
 }
 
 }  // namespace
