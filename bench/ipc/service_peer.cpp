@@ -21,6 +21,7 @@
 
 #include "harness.hpp"
 #include "payload.hpp"
+#include "shm_domain.hpp"
 #include "prime/shm.hpp"
 
 namespace {
@@ -29,10 +30,6 @@ namespace ipc = prime::bench::ipc;
 namespace shm = prime::shm;
 using namespace std::chrono_literals;
 
-std::string new_domain() {
-  static std::atomic<int> next{0};
-  return "prime-svc-" + std::to_string(::getpid()) + "-" + std::to_string(next++);
-}
 
 shm::ServiceQos echo_qos(std::size_t bytes, std::chrono::microseconds spin) {
   return {.max_request_size = bytes, .max_reply_size = bytes, .spin = spin};
@@ -75,7 +72,7 @@ const ipc::ChildEntry kServeSleeping{"ShmService.serve_sleeping", serve<true>};
 template <bool kSleeps>
 void round_trip(benchmark::State& state) {
   ipc::run(state, [&](std::size_t bytes) {
-    const auto domain = new_domain();
+    const auto domain = ipc::new_shm_domain();
     shm::Core core{domain};
     ipc::Link child{kSleeps ? "ShmService.serve_sleeping" : "ShmService.serve", bytes, {}, {domain}};
     child.wait_ready();
@@ -109,7 +106,7 @@ void BM_Calls_ShmService(benchmark::State& state) {
   ipc::run(state, [&](std::size_t) {
     const auto clients = static_cast<std::size_t>(state.range(0));
     constexpr std::size_t kBytes = 64;
-    const auto domain = new_domain();
+    const auto domain = ipc::new_shm_domain();
     shm::Core core{domain};
     std::atomic<std::uint64_t> answered{0};
     (void)core.serve_in_place<shm::Bytes, shm::Bytes>(
@@ -153,7 +150,7 @@ const ipc::ChildEntry kServeTwo{"ShmService.serve_two", serve_two};
 template <bool kLinked>
 void two_services(benchmark::State& state) {
   ipc::run(state, [&](std::size_t) {
-    const auto domain = new_domain();
+    const auto domain = ipc::new_shm_domain();
     shm::Core core{domain};
     ipc::Link child{"ShmService.serve_two", 64, {}, {domain}};
     child.wait_ready();

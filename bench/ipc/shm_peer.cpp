@@ -21,6 +21,7 @@
 
 #include "harness.hpp"
 #include "payload.hpp"
+#include "shm_domain.hpp"
 #include "prime/shm.hpp"
 
 namespace {
@@ -29,10 +30,6 @@ namespace ipc = prime::bench::ipc;
 namespace shm = prime::shm;
 using namespace std::chrono_literals;
 
-std::string new_domain() {
-  static std::atomic<int> next{0};
-  return "prime-ipc-" + std::to_string(::getpid()) + "-" + std::to_string(next++);
-}
 
 shm::TopicQos latency_qos(std::size_t bytes) { return {.capacity = 4, .max_message_size = bytes}; }
 shm::TopicQos stream_qos(std::size_t bytes) {
@@ -101,7 +98,7 @@ const ipc::ChildEntry kStream{"Shm.stream", stream};
 template <bool kSleeps>
 void latency(benchmark::State& state) {
   ipc::run(state, [&](std::size_t bytes) {
-    const auto domain = new_domain();
+    const auto domain = ipc::new_shm_domain();
     shm::Core core{domain};
     const auto qos = latency_qos(bytes);
     auto ping = core.publisher<shm::Bytes>("ping", qos);
@@ -125,7 +122,7 @@ BENCHMARK(BM_Latency_ShmSleeping)->Arg(64)->UseRealTime();
 
 void BM_Throughput_Shm(benchmark::State& state) {
   ipc::run(state, [&](std::size_t bytes) {
-    const auto domain = new_domain();
+    const auto domain = ipc::new_shm_domain();
     shm::Core core{domain};
     auto in = core.subscribe<shm::Bytes>("stream", {}, stream_qos(bytes)).subscribe();
     ipc::Link child{"Shm.stream", bytes, {}, {domain}};

@@ -11,6 +11,7 @@
 
 #include "prime/shm.hpp"
 #include "shm/domain.hpp"
+#include "shm/mappings.hpp"
 #include "shm/mapped_topic.hpp"
 #include "shm/messages.hpp"
 #include "shm/peer_process.hpp"
@@ -25,19 +26,6 @@ int segments_of(const std::string& domain) {
   for (const auto& entry : std::filesystem::directory_iterator{"/dev/shm"})
     n += entry.path().filename().string().starts_with("prime." + domain + ".") ? 1 : 0;
   return n;
-}
-
-bool inside_mapping_of(const std::string& part, const void* p) {
-  std::ifstream maps{"/proc/self/maps"};
-  std::string line;
-  const auto at = reinterpret_cast<std::uintptr_t>(p);
-  while (std::getline(maps, line)) {
-    if (line.find("/dev/shm/") == std::string::npos || line.find(part) == std::string::npos) continue;
-    std::uintptr_t begin = 0, end = 0;
-    std::sscanf(line.c_str(), "%lx-%lx", &begin, &end);
-    if (at >= begin && at < end) return true;
-  }
-  return false;
 }
 
 TEST(ShmProcesses, ASampleFromAnotherProcessIsReadInPlaceInTheSharedSegment) {

@@ -96,9 +96,9 @@ TEST(ShmServiceProcesses, ARestartedServiceIsFoundAgainByTheSameHandle) {
 
 TEST(ShmServiceProcesses, ACallerKilledMidCallLeavesNothingStuck) {
   const auto domain = unique_domain("dead-caller");
-  shm::Core core{domain};
   std::latch release{1};
   std::atomic<bool> entered{false};
+  shm::Core core{domain};  // after what its block uses: stopped first
   (void)core.serve("gate", [&](const std::int64_t& x) {
     if (x == -1) {
       entered = true;

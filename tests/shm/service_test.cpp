@@ -16,6 +16,7 @@
 #include "prime/liberty.hpp"
 #include "prime/shm.hpp"
 #include "shm/domain.hpp"
+#include "shm/mappings.hpp"
 #include "shm/mapped_topic.hpp"
 #include "support/failure.hpp"
 #include "support/threads.hpp"
@@ -34,19 +35,6 @@ struct Path {
 };
 
 Path plan(const Pose& p) { return {static_cast<std::uint32_t>(p.x + p.y), p.x * 2}; }
-
-bool inside_segment(const std::string& part, const void* p) {
-  std::ifstream maps{"/proc/self/maps"};
-  std::string line;
-  const auto at = reinterpret_cast<std::uintptr_t>(p);
-  while (std::getline(maps, line)) {
-    if (line.find("/dev/shm/") == std::string::npos || line.find(part) == std::string::npos) continue;
-    std::uintptr_t begin = 0, end = 0;
-    std::sscanf(line.c_str(), "%lx-%lx", &begin, &end);
-    if (at >= begin && at < end) return true;
-  }
-  return false;
-}
 
 std::optional<shm::RegistrySnapshot::Service> listed(shm::Core& core, const std::string& name) {
   for (const auto& s : core.registry().services)
@@ -83,13 +71,14 @@ TEST_F(ServiceTest, AServedBlockIsCalledLikeAnyChainAndListedInTheRegistry) {
 
 TEST_F(ServiceTest, ARequestIsReadInPlaceWhereTheCallerWroteIt) {
   std::atomic<const void*> request_at{nullptr};
+  shm::Core core{unique_domain("in-place")};  // stopped before what its block uses goes
   core.serve("in-place", [&](const Pose& p) {
     request_at = &p;
     return plan(p);
   });
   auto service = core.chain<Pose, Path>("in-place");
   ASSERT_TRUE(service.call({1, 2}));
-  EXPECT_TRUE(inside_segment("service.in-place", request_at.load())) << "the block read the request in shared memory";
+  EXPECT_TRUE(inside_mapping_of("service.in-place", request_at.load())) << "the block read the request in shared memory";
 }
 
 TEST_F(ServiceTest, AnExceptionComesBackWithItsMessageAndTheServiceServesOn) {
@@ -139,6 +128,15 @@ TEST_F(ServiceTest, CallingWithOtherTypesNamesTheServiceAndBothTypes) {
 TEST_F(ServiceTest, AnAnswerAfterItsCallTimedOutNeverReachesALaterCall) {
   std::latch release{1};
   std::atomic<bool> entered{false};
+  shm::Core core{unique_domain("slow")};  // stopped before what its block uses goes
+  struct Release {
+    std::latch& latch;
+    bool done = false;
+    void now() {
+      if (!std::exchange(done, true)) latch.count_down();
+    }
+    ~Release() { now(); }
+  } release_guard{release};
   core.serve("slow", [&](const int& x) {
     if (x == 1) {
       entered = true;
@@ -152,7 +150,7 @@ TEST_F(ServiceTest, AnAnswerAfterItsCallTimedOutNeverReachesALaterCall) {
   EXPECT_EQ(timed_out.error().code, Errc::timeout);
   EXPECT_NE(timed_out.error().message.find("service 'slow'"), std::string::npos);
   EXPECT_TRUE(entered);
-  release.count_down();  // the worker answers call 1 now, for no one
+  release_guard.now();  // the worker answers call 1 now, for no one
   for (int i = 2; i < 200; ++i) {
     auto got = slow.call(i);
     ASSERT_TRUE(got) << got.error().describe();
@@ -194,6 +192,13 @@ TEST_F(ServiceTest, LimitsAreErrorsThatNameTheLimitAndTheService) {
 TEST_F(ServiceTest, AFullQueueAndTooManyCallsInFlightAreRefusedByName) {
   std::latch release{1};
   std::atomic<int> running{0};
+  // A core of this test's own, made after what its block uses and so
+  // stopped (its worker joined) before that goes.
+  shm::Core core{unique_domain("busy")};
+  struct Release {  // the worker goes on even if an assertion ends the test early
+    std::latch& latch;
+    ~Release() { latch.count_down(); }
+  } release_at_end{release};
   core.serve("busy", [&](const int& x) {
     ++running;
     release.wait();
@@ -216,11 +221,11 @@ TEST_F(ServiceTest, AFullQueueAndTooManyCallsInFlightAreRefusedByName) {
   EXPECT_NE(full.error().message.find("service 'busy': 2 requests wait for a worker already (queue_depth)"),
             std::string::npos)
       << full.error().message;
-  release.count_down();
 }
 
 TEST_F(ServiceTest, PostSendsWithoutWaitingForTheAnswer) {
   std::atomic<int> sum{0};
+  shm::Core core{unique_domain("sink")};  // stopped before what its block uses goes
   core.serve("sink", [&](const int& x) {
     sum += x;
     return 0;

@@ -19,6 +19,7 @@
 #include "prime/liberty.hpp"
 #include "prime/shm.hpp"
 #include "shm/domain.hpp"
+#include "shm/mappings.hpp"
 #include "shm/mapped_topic.hpp"
 #include "support/failure.hpp"
 
@@ -36,20 +37,6 @@ struct Scan {
   bounded_string<32> frame;
   bounded_vector<float, 360> ranges;
 };
-
-// The address range of this process's mapping of a /dev/shm file whose name
-// contains `part`, read from /proc/self/maps.
-std::pair<std::uintptr_t, std::uintptr_t> mapping_of(const std::string& part) {
-  std::ifstream maps{"/proc/self/maps"};
-  std::string line;
-  while (std::getline(maps, line)) {
-    if (line.find("/dev/shm/") == std::string::npos || line.find(part) == std::string::npos) continue;
-    std::uintptr_t begin = 0, end = 0;
-    std::sscanf(line.c_str(), "%lx-%lx", &begin, &end);
-    return {begin, end};
-  }
-  return {0, 0};
-}
 
 class ShmTest : public ::testing::Test {
  protected:

@@ -19,31 +19,29 @@ namespace prime::shm::detail {
 // Two descriptors opened separately conflict even within one process, so
 // each participant (each shm::Core) has its own.
 
-inline bool try_lock_byte(int fd, off_t at) {
+// The byte at `at`, for a lock of `type` (F_WRLCK, F_UNLCK).
+inline struct flock one_byte(short type, off_t at) {
   struct flock lock {};
-  lock.l_type = F_WRLCK;
+  lock.l_type = type;
   lock.l_whence = SEEK_SET;
   lock.l_start = at;
   lock.l_len = 1;
+  return lock;
+}
+
+inline bool try_lock_byte(int fd, off_t at) {
+  auto lock = one_byte(F_WRLCK, at);
   return ::fcntl(fd, F_OFD_SETLK, &lock) == 0;
 }
 
 inline void unlock_byte(int fd, off_t at) {
-  struct flock lock {};
-  lock.l_type = F_UNLCK;
-  lock.l_whence = SEEK_SET;
-  lock.l_start = at;
-  lock.l_len = 1;
+  auto lock = one_byte(F_UNLCK, at);
   ::fcntl(fd, F_OFD_SETLK, &lock);
 }
 
 // Whether another open file description holds the byte at `at`.
 [[nodiscard]] inline bool locked_by_other(int fd, off_t at) {
-  struct flock lock {};
-  lock.l_type = F_WRLCK;
-  lock.l_whence = SEEK_SET;
-  lock.l_start = at;
-  lock.l_len = 1;
+  auto lock = one_byte(F_WRLCK, at);
   if (::fcntl(fd, F_OFD_GETLK, &lock) != 0) return true;  // cannot tell: count it as held
   return lock.l_type != F_UNLCK;
 }
