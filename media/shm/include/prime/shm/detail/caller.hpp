@@ -229,7 +229,7 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   c.posted = posted ? 1 : 0;
   c.next_hops = static_cast<std::uint32_t>(held.size() - 1);
   for (std::size_t k = 1; k < held.size(); ++k)
-    c.next[k - 1] = {held[k].service->index(), static_cast<std::uint32_t>(held[k].cell), held[k].ticket};
+    first.service->tail(first.cell).next[k - 1] = {held[k].service->index(), static_cast<std::uint32_t>(held[k].cell), held[k].ticket};
   if (posted)  // the workers free what a post leaves; the caller lets go of the rest now
     for (std::size_t k = 1; k < held.size(); ++k) held[k].service->cell(held[k].cell).posted = 1;
   c.status.store(Status::pack(first.ticket, CellState::queued), std::memory_order_release);
@@ -265,7 +265,7 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   };
   auto over = [&] { return answered() || gone.has_value(); };
   auto sleep = [&](Clock::time_point until) {
-    answer.answered.sleep_until(1, answered, std::min(until, Clock::now() + std::chrono::milliseconds{25}));
+    last.service->tail(last.cell).answered.sleep_until(1, answered, std::min(until, Clock::now() + std::chrono::milliseconds{25}));
     if (!answered()) check();
   };
   (void)prime::detail::spin_then_sleep(over, sleep, route.back()->qos().spin, deadline, std::stop_token{}, now);
@@ -276,7 +276,8 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   }
   std::expected<void, Error> result;
   if (answer.status.load() == failed) {
-    result = std::unexpected(Error{errc_from(static_cast<int>(answer.errc)).value_or(Errc::block_failed), std::string{answer.error}});
+    result = std::unexpected(Error{errc_from(static_cast<int>(answer.errc)).value_or(Errc::block_failed),
+                                   std::string{last.service->tail(last.cell).error}});
   } else {
     try {
       read(last.service->reply(last.cell), answer.reply_size);

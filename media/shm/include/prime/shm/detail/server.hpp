@@ -58,7 +58,7 @@ class Server {
     auto& h = service_->header();
     auto me = service_->registry().me();
     h.server.compare_exchange_strong(me, 0);
-    for (std::size_t i = 0; i < h.cell_count; ++i) service_->cell(i).answered.ring();  // callers see it gone
+    for (std::size_t i = 0; i < h.cell_count; ++i) service_->tail(i).answered.ring();  // callers see it gone
   }
 
   [[nodiscard]] Service& service() const noexcept { return *service_; }
@@ -129,10 +129,11 @@ class Server {
     Service* next = nullptr;
     std::byte* out = service_->reply(i);
     std::size_t capacity = h.max_reply_size;
+    auto& tail = service_->tail(i);
     if (c.next_hops > 0) {
-      next = following(c.next[0].service);
-      if (!next || !take_over(*next, c.next[0])) return finish(i, ticket, false);  // its caller gave up
-      out = next->request(c.next[0].cell);
+      next = following(tail.next[0].service);
+      if (!next || !take_over(*next, tail.next[0])) return finish(i, ticket, false);  // its caller gave up
+      out = next->request(tail.next[0].cell);
       capacity = next->header().max_request_size;
     }
 
@@ -153,7 +154,7 @@ class Server {
       error->message = "service '" + service_->name() + "': " + error->message;
       if (c.posted && report_) report_(*error);
       if (!next) return answer(i, ticket, &*error);
-      fail_linked(c, *next, *error);
+      fail_linked(c, tail, *next, *error);
       return finish(i, ticket, false);
     }
     h.served.fetch_add(1);
@@ -163,13 +164,13 @@ class Server {
       return answer(i, ticket, nullptr);
     }
     // Linked: the output already lies in the next service's cell; hand it on.
-    const auto hop = c.next[0];
+    const auto hop = tail.next[0];
     auto& to = next->cell(hop.cell);
     to.request_size = size;
     to.stamp = c.stamp;
     to.posted = c.posted;
     to.next_hops = c.next_hops - 1;
-    std::copy(c.next + 1, c.next + c.next_hops, to.next);
+    std::copy(tail.next + 1, tail.next + c.next_hops, next->tail(hop.cell).next);
     auto held = Status::pack(hop.ticket, CellState::forwarding);
     if (to.status.compare_exchange_strong(held, Status::pack(hop.ticket, CellState::queued))) {
       h.forwarded_out.fetch_add(1);
@@ -193,10 +194,10 @@ class Server {
   void answer(std::size_t i, std::uint64_t ticket, const Error* error) {
     auto& c = service_->cell(i);
     if (c.posted) return finish(i, ticket, true);
-    if (error) write_error(c, *error);
+    if (error) write_error(c, service_->tail(i), *error);
     auto running = Status::pack(ticket, CellState::running);
     if (c.status.compare_exchange_strong(running, Status::pack(ticket, error ? CellState::failed : CellState::done)))
-      c.answered.ring();
+      service_->tail(i).answered.ring();
     else
       service_->free_abandoned(i, ticket);
   }
@@ -212,9 +213,9 @@ class Server {
 
   // A linked call failed here: the caller waits on its last cell, so the
   // error goes there; the next cell, held for the output, goes back.
-  void fail_linked(const CellHeader& c, Service& next, const Error& error) {
-    const auto first = c.next[0];
-    const auto last = c.next[c.next_hops - 1];
+  void fail_linked(const CellHeader& c, const CellTail& tail, Service& next, const Error& error) {
+    const auto first = tail.next[0];
+    const auto last = tail.next[c.next_hops - 1];
     if (c.next_hops > 1) {
       auto held = Status::pack(first.ticket, CellState::forwarding);
       if (!next.cell(first.cell).status.compare_exchange_strong(held, Status::pack(first.ticket, CellState::claimed)))
@@ -223,23 +224,23 @@ class Server {
     Service* end = c.next_hops > 1 ? following(last.service) : &next;
     if (!end || (c.next_hops > 1 && !take_over(*end, last))) return;
     auto& to = end->cell(last.cell);
-    write_error(to, error);
+    write_error(to, end->tail(last.cell), error);
     auto held = Status::pack(last.ticket, CellState::forwarding);
     if (to.posted) {
       if (!to.status.compare_exchange_strong(held, Status::pack(last.ticket + 1, CellState::free)))
         end->free_abandoned(last.cell, last.ticket);
     } else if (to.status.compare_exchange_strong(held, Status::pack(last.ticket, CellState::failed))) {
-      to.answered.ring();
+      end->tail(last.cell).answered.ring();
     } else {
       end->free_abandoned(last.cell, last.ticket);
     }
   }
 
-  static void write_error(CellHeader& c, const Error& error) {
+  static void write_error(CellHeader& c, CellTail& tail, const Error& error) {
     c.errc = static_cast<std::uint32_t>(error.code);
     const auto n = std::min(error.message.size(), kErrorCapacity - 1);
-    std::memcpy(c.error, error.message.data(), n);
-    c.error[n] = '\0';
+    std::memcpy(tail.error, error.message.data(), n);
+    tail.error[n] = '\0';
   }
 
   // The service entry `index` of the registry names, mapped here.
@@ -263,9 +264,9 @@ class Server {
       const auto ticket = Status::ticket(s);
       switch (Status::state(s)) {
         case CellState::running: {
-          write_error(c, {Errc::peer_dead, "service '" + service_->name() + "': its server died while running this call"});
+          write_error(c, service_->tail(i), {Errc::peer_dead, "service '" + service_->name() + "': its server died while running this call"});
           auto running = s;
-          if (c.status.compare_exchange_strong(running, Status::pack(ticket, CellState::failed))) c.answered.ring();
+          if (c.status.compare_exchange_strong(running, Status::pack(ticket, CellState::failed))) service_->tail(i).answered.ring();
           break;
         }
         case CellState::queued:

@@ -75,6 +75,9 @@ class Service {
   [[nodiscard]] CellHeader& cell(std::size_t i) const noexcept {
     return *std::launder(reinterpret_cast<CellHeader*>(cells_ + i * header_->cell_stride));
   }
+  [[nodiscard]] CellTail& tail(std::size_t i) const noexcept {
+    return *std::launder(reinterpret_cast<CellTail*>(cells_ + i * header_->cell_stride + header_->tail_offset));
+  }
   [[nodiscard]] std::byte* request(std::size_t i) const noexcept {
     return cells_ + i * header_->cell_stride + header_->request_offset;
   }
@@ -202,8 +205,13 @@ class Service {
     h->cell_stride = geometry.cell_stride();
     h->request_offset = geometry.request_offset();
     h->reply_offset = geometry.reply_offset();
+    h->tail_offset = geometry.tail_offset();
     h->cells_offset = geometry.cells_offset();
-    for (std::size_t i = 0; i < geometry.cell_count; ++i) ::new (data + h->cells_offset + i * h->cell_stride) CellHeader{};
+    for (std::size_t i = 0; i < geometry.cell_count; ++i) {
+      auto* cell = data + h->cells_offset + i * h->cell_stride;
+      ::new (cell) CellHeader{};
+      ::new (cell + h->tail_offset) CellTail{};
+    }
     h->magic.store(kServiceMagic, std::memory_order_release);
   }
 

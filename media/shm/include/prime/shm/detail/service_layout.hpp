@@ -13,7 +13,7 @@ namespace prime::shm::detail {
 // What lives in a service's shared memory: plain data and lock-free atomics
 // addressed by offsets, like a topic's.
 //
-//   ServiceHeader | cells: cell_count × (CellHeader | request | reply)
+//   ServiceHeader | cells: cell_count × (CellHeader | reply | request | CellTail)
 //
 // A call lives in a cell of its caller's client slot: the caller writes the
 // request there, a worker reads it in place and writes the answer beside it,
@@ -22,8 +22,8 @@ namespace prime::shm::detail {
 // Each cell's status word carries a ticket that changes whenever the cell
 // is freed, so an answer meant for a call that gave up never reaches a later one.
 
-inline constexpr std::uint64_t kServiceMagic = 0x5052494d45535632ull;  // "PRIMESV2"
-inline constexpr std::uint32_t kServiceLayout = 2;
+inline constexpr std::uint64_t kServiceMagic = 0x5052494d45535633ull;  // "PRIMESV3"
+inline constexpr std::uint32_t kServiceLayout = 3;
 inline constexpr std::size_t kMaxCells = 256;
 inline constexpr std::size_t kPendingWords = kMaxCells / 64;
 inline constexpr std::size_t kMaxServiceClients = 128;
@@ -57,14 +57,21 @@ struct Hop {
   std::uint64_t ticket = 0;
 };
 
-struct CellHeader {
-  alignas(64) std::atomic<std::uint64_t> status{Status::pack(0, CellState::free)};
+// A cell is its header line, the reply, the request and its tail, in that
+// order: the line a caller polls and the first line of its answer are
+// neighbours, which the hardware fetches together.
+struct alignas(64) CellHeader {
+  std::atomic<std::uint64_t> status{Status::pack(0, CellState::free)};
   std::uint64_t request_size = 0;
   std::uint64_t reply_size = 0;
   std::int64_t stamp = 0;       // the request's, carried to the answer
   std::uint32_t posted = 0;     // no answer wanted: the worker frees the cell
   std::uint32_t errc = 0;       // Errc of a failed call
-  std::uint32_t next_hops = 0;  // entries of `next` this call goes on to
+  std::uint32_t next_hops = 0;  // entries of the tail's `next` this call goes on to
+};
+static_assert(sizeof(CellHeader) == 64, "a cell's header is the one line a caller polls");
+
+struct CellTail {
   Hop next[kMaxHops - 1];
   char error[kErrorCapacity]{};
   Doorbell answered;  // the caller sleeps here
@@ -97,6 +104,7 @@ struct ServiceHeader {
   std::uint64_t cell_stride = 0;
   std::uint64_t request_offset = 0;  // within a cell
   std::uint64_t reply_offset = 0;
+  std::uint64_t tail_offset = 0;
   std::uint64_t cells_offset = 0;
 
   alignas(64) std::atomic<ParticipantId> server{0};
@@ -120,11 +128,10 @@ struct ServiceGeometry {
   std::size_t max_reply_size;
   std::size_t cell_count;
 
-  [[nodiscard]] constexpr std::size_t request_offset() const { return round_up(sizeof(CellHeader), 64); }
-  [[nodiscard]] constexpr std::size_t reply_offset() const {
-    return round_up(request_offset() + max_request_size, 64);
-  }
-  [[nodiscard]] constexpr std::size_t cell_stride() const { return round_up(reply_offset() + max_reply_size, 64); }
+  [[nodiscard]] constexpr std::size_t reply_offset() const { return sizeof(CellHeader); }
+  [[nodiscard]] constexpr std::size_t request_offset() const { return reply_offset() + round_up(max_reply_size, 64); }
+  [[nodiscard]] constexpr std::size_t tail_offset() const { return request_offset() + round_up(max_request_size, 64); }
+  [[nodiscard]] constexpr std::size_t cell_stride() const { return round_up(tail_offset() + sizeof(CellTail), 64); }
   [[nodiscard]] constexpr std::size_t cells_offset() const { return round_up(sizeof(ServiceHeader), 64); }
   [[nodiscard]] constexpr std::size_t bytes() const { return cells_offset() + cell_count * cell_stride(); }
 };
