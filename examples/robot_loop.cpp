@@ -125,14 +125,15 @@ int main(int argc, char** argv) {
   prime::radiant::Core core;
   auto scans = core.source(lidar, "lidar", {.capacity = 8});
   auto odom = core.source(odometer, "odometry", {.capacity = 16});
-  auto latest = prime::collector(core, prime::sync(prime::latest_of_each, scans, odom), "latest");
-  auto step = latest | core.chain(localize, "localize") | core.chain(plan, "plan") | core.chain(control, "control");
+  // The newest synchronised pair, or nothing before the first: "not yet" is a value.
+  auto latest = prime::collector(core, prime::sync(prime::latest_of_each, scans, odom), prime::or_nothing, "latest");
+  auto step = core.chain(localize, "localize") | core.chain(plan, "plan") | core.chain(control, "control");
 
   if (dot) {
-    std::cout << step.graph().dot();
+    std::cout << latest.graph().dot() << step.graph().dot();
     return 0;
   }
-  std::cout << "Topology:\n" << step.graph().text() << '\n';
+  std::cout << "Topology:\n" << latest.graph().text() << step.graph().text() << '\n';
 
   std::atomic<int> scan_count{0}, odom_count{0};
   {
@@ -144,16 +145,17 @@ int main(int argc, char** argv) {
     const auto end = prime::Clock::now() + std::chrono::duration<double>(seconds);
     for (auto next = prime::Clock::now(); next < end; next += kPeriod) {
       std::this_thread::sleep_until(next);
-      try {
-        const Command cmd = step(prime::Token{});
-        robot.drive(cmd, std::chrono::duration<double>(kPeriod).count());
-        if (++cycles % 25 == 0) {
-          const auto [x, y] = robot.where();
-          std::printf("t=%4.1fs  robot at (%5.2f, %5.2f)  command: speed %.2f m/s, turn %+.2f rad/s\n",
-                      cycles * 0.02, x, y, cmd.speed, cmd.turn_rate);
-        }
-      } catch (const prime::Failure& f) {
+      const auto sensed = latest(prime::Token{});
+      if (!sensed) {
         ++waiting;  // no synchronised scan and odometry yet: hold still
+        continue;
+      }
+      const Command cmd = step(*sensed);
+      robot.drive(cmd, std::chrono::duration<double>(kPeriod).count());
+      if (++cycles % 25 == 0) {
+        const auto [x, y] = robot.where();
+        std::printf("t=%4.1fs  robot at (%5.2f, %5.2f)  command: speed %.2f m/s, turn %+.2f rad/s\n",
+                    cycles * 0.02, x, y, cmd.speed, cmd.turn_rate);
       }
     }
     const auto [x, y] = robot.where();

@@ -77,21 +77,18 @@ int planner(const std::string& domain, std::chrono::seconds run_for) {
   // The chain takes the view, so it reads the scan where the lidar wrote it;
   // a chain taking Scan would get a copy.
   auto in_place = [](const prime::shm::View<Scan>& scan) { return nearest(*scan); };
-  auto obstacle = prime::collector(local, scans | local.chain(in_place, "nearest"));
+  auto obstacle = prime::collector(local, scans | local.chain(in_place, "nearest"), prime::or_nothing);
   std::printf("topology:\n%s\n", obstacle.graph().text().c_str());
 
   int steered = 0;
   const auto end = std::chrono::steady_clock::now() + run_for;
   while (std::chrono::steady_clock::now() < end) {
     std::this_thread::sleep_for(50ms);
-    try {
-      const auto o = obstacle(prime::Token{});
-      const float turn = o.bearing_deg < 180 ? -1.0f : 1.0f;  // steer away from it
-      if (++steered % 10 == 0)
-        std::printf("nearest obstacle %.2f m at %3.0f deg -> turn %+.0f\n", o.distance, o.bearing_deg, turn);
-    } catch (const prime::Failure& f) {
-      if (f.error().code != prime::Errc::no_data) throw;  // no scan yet: the lidar is still starting
-    }
+    const auto o = obstacle(prime::Token{});
+    if (!o) continue;  // no scan yet: the lidar is still starting
+    const float turn = o->bearing_deg < 180 ? -1.0f : 1.0f;  // steer away from it
+    if (++steered % 10 == 0)
+      std::printf("nearest obstacle %.2f m at %3.0f deg -> turn %+.0f\n", o->distance, o->bearing_deg, turn);
   }
   const auto registry = shm.registry();
   std::printf("registry: %zu participants, topic '%s' (%s) published %llu scans\n", registry.participants.size(),

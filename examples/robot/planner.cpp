@@ -1,7 +1,8 @@
 // The planner process: sync pairs each scan with the odometry nearest its
-// stamp; a collector holds the newest pair; a 50 Hz control loop runs
-// localize | plan | control on it and calls the driver's service with the
-// command, stamped with the scan's time.
+// stamp (adaptive approximate time: no tolerance to tune; knowing the
+// sensors' rates lets it decide sooner); a collector holds the newest pair;
+// a 50 Hz control loop runs localize | plan | control on it and calls the
+// driver's service with the command, stamped with the scan's time.
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -16,7 +17,8 @@
 namespace robot {
 
 using namespace std::chrono_literals;
-using Sensed = std::tuple<prime::shm::View<Scan>, prime::shm::View<Odometry>>;
+// A synchronised set: the scan and the odometry, read in place, with their stamps.
+using Sensed = prime::Synced<prime::shm::View<Scan>, prime::shm::View<Odometry>>;
 
 struct Pose {
   double x, y, heading;
@@ -32,7 +34,7 @@ Pose localize(const Sensed& in) {
   const auto& [scan, odom] = in;
   const double x = (kRoom - scan->wall_distance[0] + scan->wall_distance[2]) / 2;
   const double y = (kRoom - scan->wall_distance[1] + scan->wall_distance[3]) / 2;
-  return {x, y, odom->heading, scan.stamp().time_since_epoch().count()};
+  return {x, y, odom->heading, in.stamp<0>().time_since_epoch().count()};
 }
 Path plan(const Pose& p) {  // drive a square: corner to corner
   const double goal = (std::fmod(static_cast<double>(p.stamp_ns) / 1e9, 20.0) < 10.0) ? kRoom - 1 : 1;
@@ -51,9 +53,9 @@ int planner(const std::string& domain, const std::atomic<bool>& stop) {
   prime::shm::Core shm{domain, {.participant = "planner"}};
   prime::liberty::Core local;
   const prime::shm::TopicQos lidar_qos{.capacity = 16}, odom_qos{.capacity = 32};
-  auto sets = prime::sync(prime::approximate_time(10ms), shm.subscribe<Scan>("sensors/lidar", {}, lidar_qos),
-                          shm.subscribe<Odometry>("sensors/odom", {}, odom_qos));
-  auto newest = prime::collector(local, sets);
+  auto sets = prime::sync(prime::approximate_time({.min_interval = {15ms, 5ms}}),
+                          shm.subscribe<Scan>("sensors/lidar", {}, lidar_qos), shm.subscribe<Odometry>("sensors/odom", {}, odom_qos));
+  auto newest = prime::collector(local, sets, prime::or_nothing);  // nothing before the first pair
   auto step = local.chain(localize, "localize") | local.chain(plan, "plan") | local.chain(control, "control");
   auto motors = shm.chain<MotorCommand, Applied>("driver/command", {.timeout = 50ms, .wait_for_service = 5s});
   std::uint64_t cycles = 0, sent = 0, waiting = 0;
@@ -61,12 +63,10 @@ int planner(const std::string& domain, const std::atomic<bool>& stop) {
   for (auto next = prime::Clock::now(); !stop; next += 20ms) {  // the 50 Hz control loop
     std::this_thread::sleep_until(next);
     ++cycles;
-    try {
-      const auto command = step(newest(prime::Token{}));
-      if (auto applied = motors.call(command)) ++sent;
+    if (const auto sensed = newest(prime::Token{})) {
+      if (auto applied = motors.call(step(*sensed))) ++sent;
       else std::printf("[planner] driver: %s\n", applied.error().describe().c_str());
-    } catch (const prime::Failure& f) {
-      if (f.error().code != prime::Errc::no_data) throw;
+    } else {
       ++waiting;  // no synchronised pair yet
     }
     if (prime::Clock::now() - last_print >= 1s) {

@@ -56,9 +56,11 @@ struct Harness<shm::Core> {
 
   template <class T>
   static Feed<T> feed(shm::Core& core, std::string name, Qos qos = {}) {
-    // Views pin slots: enough of them for the suite's syncs to wait for matches.
+    // Views pin slots: enough of them for the suite's syncs to wait for
+    // matches and to queue the few sets a test makes in one burst (a sync
+    // queues a quarter of its inputs' budget for its reader).
     const shm::TopicQos topic{
-        .capacity = qos.capacity, .overflow = qos.overflow, .block_timeout = qos.block_timeout, .max_held = 16};
+        .capacity = qos.capacity, .overflow = qos.overflow, .block_timeout = qos.block_timeout, .max_held = 32};
     auto publisher = core.publisher<T>(name, topic);
     auto source = core.subscribe<T>(name, {.spin = qos.spin}, topic);
     return {std::move(publisher), std::move(source)};

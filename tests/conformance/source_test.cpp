@@ -16,6 +16,7 @@
 #include "conformance/media.hpp"
 #include "support/failure.hpp"
 #include "support/lifetime.hpp"
+#include "support/sync_scenarios.hpp"
 #include "support/threads.hpp"
 
 namespace prime::test {
@@ -38,7 +39,18 @@ bool eventually(F done) {
 }
 
 template <class M>
-using SourceTest = MediumTest<M>;
+class SourceTest : public MediumTest<M> {
+ protected:
+  // Plays a sync scenario through two feeds of this medium.
+  void play(SyncPolicy policy, const SyncScenario& scenario) {
+    auto lidar = this->template feed<int>("lidar");
+    auto odom = this->template feed<int>("odom");
+    auto fused = sync(policy, lidar.source, odom.source);
+    auto reader = fused.subscribe();
+    const auto t0 = Clock::now();
+    test::play(scenario, t0, [&](int input, int ms) { (input == 0 ? lidar : odom).emit(ms, at(t0, ms)); }, reader);
+  }
+};
 TYPED_TEST_SUITE(SourceTest, Media, MediumName);
 
 TYPED_TEST(SourceTest, ReaderSeesValuesInOrderWithTheirStamps) {
@@ -278,41 +290,12 @@ TYPED_TEST(SourceTest, SyncLatestOfEachPairsTheFirstSourceWithTheNewestOfTheOthe
   EXPECT_FALSE(reader.read_for(20ms)) << "only the first source's values make tuples";
 }
 
-TYPED_TEST(SourceTest, SyncApproximateTimeMatchesWithinTheTolerance) {
-  auto lidar = this->template feed<int>("lidar");
-  auto odom = this->template feed<int>("odom");
-  auto fused = sync(approximate_time(3ms), lidar.source, odom.source);
-  auto reader = fused.subscribe();
-  const auto t0 = Clock::now();
-  // Whatever order the two workers deliver in, only 21 and 20 lie within 3 ms.
-  for (int ms : {0, 20}) odom.emit(ms, t0 + std::chrono::milliseconds{ms});
-  for (int ms : {21, 50}) lidar.emit(ms, t0 + std::chrono::milliseconds{ms});
-  auto pair = reader.read_for(kPatience);
-  ASSERT_TRUE(pair) << pair.error().describe();
-  EXPECT_EQ(pair->value, (std::tuple<int, int>{21, 20}));
-  EXPECT_EQ(pair->stamp, t0 + 21ms) << "a tuple carries its newest stamp";
-  EXPECT_FALSE(reader.read_for(20ms));
+TYPED_TEST(SourceTest, SyncWithinToleranceMatchesOnlyValuesThatClose) {
+  this->play(within_tolerance(3ms), kWithinToleranceScenario);
 }
 
 TYPED_TEST(SourceTest, SyncExactTimeMatchesEqualStampsAndDropsTheUnmatched) {
-  auto lidar = this->template feed<int>("lidar");
-  auto odom = this->template feed<int>("odom");
-  auto fused = sync(exact_time, lidar.source, odom.source);
-  auto reader = fused.subscribe();
-  const auto t0 = Clock::now();
-  for (int i = 0; i < 6; ++i) odom.emit(100 + i, t0 + i * 10ms);
-  lidar.emit(1, t0 + 10ms);
-  lidar.emit(2, t0 + 25ms);  // no odom at 25 ms
-  lidar.emit(3, t0 + 40ms);
-  std::vector<std::tuple<int, int>> pairs;
-  for (int i = 0; i < 2; ++i) {
-    auto pair = reader.read_for(kPatience);
-    ASSERT_TRUE(pair) << pair.error().describe();
-    EXPECT_EQ(pair->stamp, t0 + (i == 0 ? 10ms : 40ms));
-    pairs.push_back(pair->value);
-  }
-  EXPECT_EQ(pairs, (std::vector<std::tuple<int, int>>{{1, 101}, {3, 104}}));
-  EXPECT_FALSE(reader.read_for(20ms)) << "lidar 2 had no partner";
+  this->play(exact_time, kExactTimeScenario);
 }
 
 TYPED_TEST(SourceTest, SyncedTuplesFeedACollectorAndAChain) {
@@ -331,6 +314,55 @@ TYPED_TEST(SourceTest, SyncedTuplesFeedACollectorAndAChain) {
       return false;
     }
   }));
+}
+
+TYPED_TEST(SourceTest, SyncApproximateTimeMakesTheBestSetsWhateverTheWorkersOrder) {
+  this->play(approximate_time(), kApproximateTimeScenario);
+}
+
+TYPED_TEST(SourceTest, SyncLatestOfEachCanBeMadeByAnyInput) {
+  auto lidar = this->template feed<int>("lidar");
+  auto odom = this->template feed<int>("odom");
+  auto fused = sync(latest_of_each_on(kAnyInput), lidar.source, odom.source);
+  auto reader = fused.subscribe();
+  const auto t0 = Clock::now();
+  lidar.emit(1, t0);
+  odom.emit(10, t0 + 1ms);  // the first set: both have spoken
+  auto set = reader.read_for(kPatience);
+  ASSERT_TRUE(set) << set.error().describe();
+  EXPECT_EQ((static_cast<const std::tuple<int, int>&>(set->value)), (std::tuple<int, int>{1, 10}));
+  odom.emit(20, t0 + 2ms);  // an odometry value makes a set too
+  set = reader.read_for(kPatience);
+  ASSERT_TRUE(set) << set.error().describe();
+  EXPECT_EQ((static_cast<const std::tuple<int, int>&>(set->value)), (std::tuple<int, int>{1, 20}));
+  EXPECT_EQ(set->stamp, t0 + 2ms) << "the set's stamp is the value that made it";
+}
+
+TYPED_TEST(SourceTest, InterpolateAtGivesTheOtherValueAtEachTriggersStampOrAnError) {
+  const InterpolationScenario scenario;
+  auto lidar = this->template feed<int>("lidar");
+  auto odom = this->template feed<double>("odom");
+  auto fused = interpolate_at(lidar.source, odom.source, {.max_gap = scenario.max_gap});
+  auto reader = fused.subscribe();
+  const auto t0 = Clock::now();
+  test::play(scenario, t0, [&](int input, int ms) { input == 0 ? lidar.emit(ms, at(t0, ms)) : odom.emit(ms, at(t0, ms)); }, reader);
+}
+
+TYPED_TEST(SourceTest, ACollectorCanSayNotYetWithoutAnError) {
+  auto& core = *this->core;
+  auto odom = this->template feed<int>("odom");
+  auto maybe = collector(core, odom.source | this->core->chain(twice), or_nothing);
+  EXPECT_EQ(maybe(Token{}), std::nullopt) << "nothing yet is a value, not an error";
+  auto waiting = collector(core, odom.source, first_within(kPatience));
+  std::jthread later{[&, reading = ::gettid()] {
+    if (asleep_within(reading)) odom.emit(7);  // once the call below waits for the first value
+  }};
+  EXPECT_EQ(waiting(Token{}), 7) << "a call before the first value waits for it";
+  EXPECT_EQ(waiting(Token{}), 7) << "and it stays the newest";
+  ASSERT_TRUE(eventually([&] { return maybe(Token{}) == 14; }));
+  auto silent = this->template feed<int>("silent");
+  EXPECT_TRUE(fails_with([&] { (void)collector(core, silent.source, first_within(20ms))(Token{}); }, Errc::no_data,
+                         "collector of 'silent': nothing published within 20 ms"));
 }
 
 TYPED_TEST(SourceTest, RepeatReadsTheSourceEachIteration) {

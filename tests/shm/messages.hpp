@@ -49,6 +49,18 @@ struct Answer {
 PRIME_DESCRIBE(Ask, who, n)
 PRIME_DESCRIBE(Answer, who, n)
 
+// Asks the emitter peer to publish `value` on its topic number `topic`
+// (0: lidar, 1: odom, 2: odom_x as a double), stamped `stamp_ns` on the
+// steady clock every process on the machine shares.
+struct Emit {
+  std::int32_t topic;
+  std::int32_t value;
+  std::int64_t stamp_ns;
+};
+PRIME_DESCRIBE(Emit, topic, value, stamp_ns)
+// The emitter's topics: max_held leaves a sync room to wait for matches.
+inline constexpr shm::TopicQos kEmitterTopics{.capacity = 64, .max_held = 32};
+
 // A described message with text and numbers, for the command-line tool.
 struct Tick {
   std::uint64_t n;

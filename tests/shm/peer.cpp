@@ -21,6 +21,7 @@
 //   shm_peer listen   <domain> <topic>                           print each Tick received: "tick <n> <x> <tag>"
 //   shm_peer call_many <domain> <service> <threads> <calls>      echo: each thread's calls checked, print "ok <n>"
 //   shm_peer call_once <domain> <service> <value>                print "calling", call, print the answer
+//   shm_peer emitter  <domain>                                   serve "emit": publish an Emit on lidar, odom or odom_x
 #include <unistd.h>
 
 #include <atomic>
@@ -146,15 +147,14 @@ int main(int argc, char** argv) {
                      std::this_thread::sleep_for(1ms);  // a slow consumer: sets wait for it
                      return ++matched;
                    });
-    auto newest = collector(local, sets);
+    auto newest = collector(local, sets, or_nothing);
     say("subscribed");
     const auto end = Clock::now() + std::chrono::seconds{arg(3)};
     std::uint64_t polled = 0;
     while (Clock::now() < end) {
-      try {
-        auto [lidar, odom] = newest(Token{});  // holds the set until the next call, like a control loop
+      if (auto set = newest(Token{})) {  // held until the next call, like a control loop
+        const auto& [lidar, odom] = *set;
         polled += *lidar == *odom ? 1 : 0;
-      } catch (const Failure&) {  // nothing matched yet
       }
       std::this_thread::sleep_for(20ms);  // the control loop's period
     }
@@ -283,6 +283,21 @@ int main(int argc, char** argv) {
     say("calling");
     auto got = service.call(static_cast<std::int64_t>(arg(4)));
     say(got ? "answer " + std::to_string(*got) : "error " + got.error().describe());
+    forever();
+  }
+  if (role == "emitter" && argc == 3) {
+    auto lidar = core.publisher<int>("lidar", test::kEmitterTopics);
+    auto odom = core.publisher<int>("odom", test::kEmitterTopics);
+    auto odom_x = core.publisher<double>("odom_x", test::kEmitterTopics);
+    (void)core.serve("emit", [&](const test::Emit& e) -> std::int64_t {
+      const Clock::time_point stamp{Clock::duration{e.stamp_ns}};
+      const auto sent = e.topic == 0   ? lidar.publish(e.value, stamp)
+                        : e.topic == 1 ? odom.publish(e.value, stamp)
+                                       : odom_x.publish(static_cast<double>(e.value), stamp);
+      if (!sent) fail(sent.error().describe());
+      return e.value;
+    });
+    say("serving");
     forever();
   }
   fail("unknown role or wrong arguments: " + role);

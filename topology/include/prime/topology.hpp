@@ -11,6 +11,7 @@
 #include "prime/topology/forward.hpp"
 #include "prime/topology/graph.hpp"
 #include "prime/topology/if_then_else.hpp"
+#include "prime/topology/interpolate.hpp"
 #include "prime/topology/link.hpp"
 #include "prime/topology/local_source.hpp"
 #include "prime/topology/qos.hpp"

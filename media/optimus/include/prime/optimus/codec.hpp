@@ -17,6 +17,7 @@
 #include "prime/common/bounded_string.hpp"
 #include "prime/common/fingerprint.hpp"
 #include "prime/logic/error.hpp"
+#include "prime/topology/sync.hpp"
 
 // MessagePack knows bounded_string as text, so it travels inside other
 // messages (a std::vector of them, say) as a std::string would.
@@ -37,6 +38,32 @@ struct convert<prime::bounded_string<N>> {
   const msgpack::object& operator()(const msgpack::object& o, prime::bounded_string<N>& text) const {
     if (o.type != msgpack::type::STR) throw msgpack::type_error();
     text.assign(std::string_view{o.via.str.ptr, o.via.str.size});  // throws when it does not fit
+    return o;
+  }
+};
+// A synced set travels as [values, stamps]: its tuple, then each value's
+// stamp in steady-clock nanoseconds (the same clock in every process on the
+// machine).
+template <class... Ts>
+struct pack<prime::Synced<Ts...>> {
+  template <class Stream>
+  packer<Stream>& operator()(packer<Stream>& out, const prime::Synced<Ts...>& set) const {
+    out.pack_array(2);
+    out.pack(static_cast<const std::tuple<Ts...>&>(set));
+    out.pack_array(sizeof...(Ts));
+    for (const auto stamp : set.stamps) out.pack(static_cast<std::int64_t>(stamp.time_since_epoch().count()));
+    return out;
+  }
+};
+template <class... Ts>
+struct convert<prime::Synced<Ts...>> {
+  const msgpack::object& operator()(const msgpack::object& o, prime::Synced<Ts...>& set) const {
+    if (o.type != msgpack::type::ARRAY || o.via.array.size != 2) throw msgpack::type_error();
+    o.via.array.ptr[0].convert(static_cast<std::tuple<Ts...>&>(set));
+    const msgpack::object& stamps = o.via.array.ptr[1];
+    if (stamps.type != msgpack::type::ARRAY || stamps.via.array.size != sizeof...(Ts)) throw msgpack::type_error();
+    for (std::size_t i = 0; i < sizeof...(Ts); ++i)
+      set.stamps[i] = prime::Clock::time_point{prime::Clock::duration{stamps.via.array.ptr[i].as<std::int64_t>()}};
     return o;
   }
 };
