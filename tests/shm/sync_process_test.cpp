@@ -9,6 +9,7 @@
 #include <string>
 #include <tuple>
 
+#include "prime/liberty.hpp"
 #include "prime/shm.hpp"
 #include "shm/domain.hpp"
 #include "shm/mappings.hpp"
@@ -65,6 +66,24 @@ TEST_F(ShmSyncAcrossProcesses, ApproximateTimeHoldsViewsThatReadInPlaceWithinThe
   EXPECT_EQ(*odom, 10);
   EXPECT_TRUE(inside_mapping_of("lidar", lidar.get())) << "the scan is read where the emitter wrote it";
   EXPECT_TRUE(inside_mapping_of("odom", odom.get()));
+}
+
+TEST_F(ShmSyncAcrossProcesses, AChainTakingTheSetOfViewsReadsEveryPartInPlace) {
+  using Set = Synced<shm::View<int>, shm::View<int>>;
+  liberty::Core local;
+  auto fused = sync(approximate_time({.min_interval = {20ms, 20ms}}), topic("lidar"), topic("odom"));
+  auto checked = fused | local.chain([](const Set& set) {
+                   const auto& [lidar, odom] = set;
+                   const bool in_place = inside_mapping_of("lidar", lidar.get()) && inside_mapping_of("odom", odom.get());
+                   return std::tuple<int, int, bool, Clock::duration>{*lidar, *odom, in_place, set.skew()};
+                 });
+  auto reader = checked.subscribe();
+  emit(1, 10);
+  emit(0, 12);  // no odometry can come before 30 ms: decided at once
+  auto got = reader.read_for(5s);
+  ASSERT_TRUE(got) << got.error().describe();
+  EXPECT_EQ(got->value, (std::tuple<int, int, bool, Clock::duration>{12, 10, true, 2ms}))
+      << "(lidar, odom, read in place, skew)";
 }
 
 TEST_F(ShmSyncAcrossProcesses, LatestOfEachMadeByAnyInput) {
