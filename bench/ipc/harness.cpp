@@ -89,6 +89,21 @@ void round_trip_payloads(benchmark::internal::Benchmark* b) {
   b->UseRealTime();
 }
 
+void report_percentiles(benchmark::State& state, std::vector<std::uint32_t>& samples, double divisor) {
+  if (samples.empty()) return;
+  auto at = [&](double q) {
+    const auto k = std::min(samples.size() - 1, static_cast<std::size_t>(q * static_cast<double>(samples.size())));
+    std::nth_element(samples.begin(), samples.begin() + static_cast<std::ptrdiff_t>(k), samples.end());
+    return static_cast<double>(samples[k]) / divisor;
+  };
+  // Rising quantiles: each nth_element leaves the part above k for the next.
+  state.counters["p50_ns"] = at(0.5);
+  state.counters["p90_ns"] = at(0.9);
+  state.counters["p99_ns"] = at(0.99);
+  state.counters["p999_ns"] = at(0.999);
+  state.counters["max_ns"] = static_cast<double>(*std::max_element(samples.begin(), samples.end())) / divisor;
+}
+
 PeerError out_of_sequence(std::uint64_t expected, std::uint64_t got) {
   return PeerError{"message " + std::to_string(expected) + " expected, " + std::to_string(got) +
                    " arrived: the stream lost or reordered a message"};

@@ -66,6 +66,7 @@
 
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <concepts>
@@ -294,17 +295,33 @@ template <Side S>
 // page faults and cold caches.
 inline constexpr int kWarmUpMessages = 10;
 
+// Reports the distribution of `samples` (nanoseconds, reordered) divided by
+// `divisor` as the counters p50_ns, p90_ns, p99_ns, p999_ns and max_ns.
+void report_percentiles(benchmark::State& state, std::vector<std::uint32_t>& samples, double divisor);
+
 // Times the benchmark's iterations, one round trip each, and reports
-// `one_way_ns`, half a round trip. round_trip(seq) sends `seq` and returns
-// once the answer carrying it is back. A few run untimed first.
+// `one_way_ns`, half a round trip on average, and the percentiles of the
+// one-way time from every round trip's own timing (one clock read per
+// round trip: the end of one is the start of the next). round_trip(seq)
+// sends `seq` and returns once the answer carrying it is back. A few run
+// untimed first.
 template <class RoundTrip>
 void time_round_trips(benchmark::State& state, RoundTrip round_trip) {
   std::uint64_t seq = 0;
   for (int i = 0; i < kWarmUpMessages; ++i) round_trip(++seq);
+  std::vector<std::uint32_t> samples;
+  samples.reserve(static_cast<std::size_t>(state.max_iterations));
   const auto start = std::chrono::steady_clock::now();
-  for (auto _ : state) round_trip(++seq);
-  const std::chrono::duration<double, std::nano> elapsed = std::chrono::steady_clock::now() - start;
+  auto last = start;
+  for (auto _ : state) {
+    round_trip(++seq);
+    const auto now = std::chrono::steady_clock::now();
+    samples.push_back(static_cast<std::uint32_t>(std::min<std::int64_t>((now - last).count(), UINT32_MAX)));
+    last = now;
+  }
+  const std::chrono::duration<double, std::nano> elapsed = last - start;
   state.counters["one_way_ns"] = elapsed.count() / (2.0 * static_cast<double>(state.iterations()));
+  report_percentiles(state, samples, 2.0);
 }
 
 // Times the benchmark's iterations, one message received each, and reports
