@@ -1,6 +1,7 @@
 // prime: see a running Prime system from a terminal, and drive it.
 //
 //   prime [--domain D | --redis URL] [--json] <command>
+//   prime bench [--quick] [--out DIR]     what each hop costs: a report folder
 //
 // Shm domains (the default; --domain, or PRIME_DOMAIN, or "robot") and
 // Optimus domains (--redis tcp://host:port, with --domain as the key prefix).
@@ -8,7 +9,9 @@
 // service, 4 nothing arrived in time, 5 Redis unreachable.
 #include <CLI/CLI.hpp>
 
+#include <chrono>
 #include <csignal>
+#include <ctime>
 #include <cstdlib>
 #include <exception>
 #include <functional>
@@ -16,11 +19,19 @@
 #include <string>
 
 #include "prime/logic/error.hpp"
+#include "bench/command.hpp"
 #include "shm_commands.hpp"
 
 namespace {
 
 using namespace prime::tool;
+
+std::string bench_folder_name() {
+  const auto now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  char text[48];
+  std::strftime(text, sizeof text, "prime-bench-%Y%m%d-%H%M%S", std::gmtime(&now));
+  return text;
+}
 
 int exit_for(prime::Errc code) {
   switch (code) {
@@ -101,6 +112,18 @@ int main(int argc, char** argv) {
   command("graph", "the running system as Graphviz DOT", [&] { return shm_graph(o); }, [&] { return optimus_graph(o); });
   command("clean", "remove what dead participants left; never touches a live one's", [&] { return shm_clean(o); })
       ->add_flag("--all", o.all, "every domain on this machine, not only --domain");
+  bench::Options b;
+#ifdef PRIME_BENCH_DIR
+  b.bin_dir = PRIME_BENCH_DIR;
+#endif
+  auto* bench = command("bench", "measure what each hop costs, against the floors and the peers: a report folder",
+                        [&] {
+                          if (b.out.empty()) b.out = bench_folder_name();
+                          return bench::run(b);
+                        });
+  bench->add_flag("--quick", b.quick, "the main figures only, in under two minutes");
+  bench->add_option("--out", b.out, "the report folder (default: prime-bench-<date>-<time>)");
+  bench->add_option("--bin-dir", b.bin_dir, "where the benchmark binaries are (default: this build's bench/)");
 
   try {
     app.parse(argc, argv);

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# The smoke test of `prime bench --quick`: the command runs every suite and
+# writes a report with the main figures, a summary and rendered plots. Speed
+# is not checked here; only that the report is whole.
+#
+#   bench/check_report.sh <path/to/prime> <report folder>
+set -euo pipefail
+prime="$1"
+out="$2"
+rm -rf "$out"
+"$prime" bench --quick --out "$out"
+
+fail() { echo "check_report: $*" >&2; exit 1; }
+csv="$out/figures.csv"
+[[ -s "$csv" ]] || fail "no figures.csv"
+[[ "$(head -1 "$csv")" == "who,scenario,payload,statistic,value,unit" ]] || fail "figures.csv has no header"
+for row in "Floor,latency,64,p50," "Shm,latency,64,p50," "Shm,latency,64,p99.9," "Shm,latency,1048576,max," \
+           "Shm,throughput,64,rate," "ShmService,round-trip,64,p50," "FutexWake,latency-sleeping,64,p50," \
+           "For,table1-1lane,100,per hop," "Liberty,table1-1lane,100,per hop,"; do
+  grep -q "^$row" "$csv" || fail "figures.csv lacks $row"
+done
+if command -v redis-server >/dev/null; then
+  grep -q "^Optimus,hop,0,mean," "$csv" || fail "figures.csv lacks the Optimus hop"
+fi
+grep -q "^## Headline" "$out/summary.md" || fail "summary.md has no headline"
+grep -q "| Shm one-way latency, 64 B, p50 |" "$out/summary.md" || fail "the headline lacks Shm's latency"
+grep -q "Measured .* CPUs" "$out/summary.md" || fail "summary.md does not say which machine"
+if grep -E "exited with status|ran past|reported nothing" "$out/summary.md"; then fail "a benchmark crashed or hung"; fi
+for plot in latency latency-distribution-64 throughput service table1; do
+  [[ -s "$out/plots/$plot.svg" && -s "$out/plots/$plot.png" ]] || fail "plot $plot was not rendered"
+done
+echo "check_report: the quick report is whole: $(($(wc -l < "$csv") - 1)) figures"

@@ -1,0 +1,238 @@
+// `prime bench`: every benchmark suite, one benchmark per process run, with
+// progress on stderr, into a report folder (report.hpp says what is in it).
+#include "command.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <exception>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+
+#include "machine.hpp"
+#include "process.hpp"
+#include "report.hpp"
+#include "suites.hpp"
+
+namespace prime::tool::bench {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::atomic<bool> interrupted{false};
+
+std::string clock_text(Clock::duration d) {
+  const auto s = std::chrono::duration_cast<std::chrono::seconds>(d).count();
+  char text[16];
+  std::snprintf(text, sizeof text, "%lld:%02lld", static_cast<long long>(s / 60), static_cast<long long>(s % 60));
+  return text;
+}
+
+std::string regex_quoted(const std::string& name) {
+  std::string out = "^";
+  for (const char c : name) {
+    if (std::string{".[]{}()*+?^$|\\"}.find(c) != std::string::npos) out += '\\';
+    out += c;
+  }
+  return out + "$";
+}
+
+// Progress on stderr: one line redrawn on a terminal, a line per benchmark otherwise.
+class Progress {
+ public:
+  explicit Progress(std::size_t total) : total_{total}, tty_{::isatty(STDERR_FILENO) == 1} {}
+
+  void start(std::size_t index, const std::string& suite, const std::string& benchmark) {
+    index_ = index;
+    label_ = suite + "  " + benchmark;
+    began_ = Clock::now();
+    show(!tty_);
+  }
+  void tick() {
+    if (tty_) show(false);
+  }
+  void finish(Clock::duration took) {
+    spent_ += took;
+    ++done_;
+  }
+  void end() const {
+    if (tty_) std::cerr << "\r\033[K";
+  }
+
+ private:
+  void show(bool newline) const {
+    const auto elapsed = spent_ + (Clock::now() - began_);
+    std::string left = "?";
+    if (done_ > 0) left = clock_text(spent_ / done_ * static_cast<long>(total_ - done_));
+    std::ostringstream line;
+    line << '[' << index_ + 1 << '/' << total_ << "] " << label_ << "   " << clock_text(elapsed) << " elapsed, ~" << left
+         << " left";
+    if (tty_) std::cerr << "\r\033[K" << line.str() << std::flush;
+    if (newline) std::cerr << line.str() << '\n';
+  }
+
+  std::size_t total_, index_ = 0, done_ = 0;
+  bool tty_;
+  std::string label_;
+  Clock::time_point began_{};
+  Clock::duration spent_{};
+};
+
+struct Planned {
+  const Suite* suite;
+  std::string benchmark;
+};
+
+// The benchmarks `suite` has in this mode, or why it cannot run.
+std::vector<std::string> list(const Suite& suite, const std::filesystem::path& binary, bool quick, Results& results) {
+  if (!std::filesystem::exists(binary)) {
+    results.skipped.push_back({suite.name, "", binary.string() + " is not built (configure with -DPRIME_BUILD_BENCH=ON)"});
+    return {};
+  }
+  for (const auto& program : suite.needs)
+    if (!on_path(program)) {
+      results.skipped.push_back({suite.name, "", program + " is not installed"});
+      return {};
+    }
+  Finished listed;
+  try {
+    listed = run_program({binary.string(), "--benchmark_list_tests=true",
+                          "--benchmark_filter=" + (quick ? suite.quick_filter : suite.full_filter)},
+                         std::nullopt, std::chrono::seconds{30});
+  } catch (const std::exception& e) {
+    results.skipped.push_back({suite.name, "", e.what()});
+    return {};
+  }
+  if (listed.status != 0) {
+    results.skipped.push_back({suite.name, "", binary.string() + " could not list its benchmarks (exit " +
+                                                   std::to_string(listed.status) + ")"});
+    return {};
+  }
+  std::vector<std::string> names;
+  std::istringstream lines{listed.output};
+  for (std::string line; std::getline(lines, line);)
+    if (line.starts_with("BM_")) names.push_back(line);
+  for (const auto& [part, reason] : suite.expected)
+    if (std::none_of(names.begin(), names.end(), [&](const std::string& n) { return n.find(part) != std::string::npos; }))
+      results.skipped.push_back({suite.name, "BM" + part + "*", reason});
+  return names;
+}
+
+// Runs one benchmark and adds what it measured, or why it could not.
+void run_one(const Suite& suite, const std::filesystem::path& binary, const std::string& benchmark, bool quick,
+             const std::filesystem::path& raw, std::size_t index, Progress& progress, Results& results) {
+  const auto json = raw / (suite.name + "-" + std::to_string(index) + ".json");
+  std::vector<std::string> argv{binary.string(),
+                                "--benchmark_filter=" + regex_quoted(benchmark),
+                                "--benchmark_min_time=" + std::to_string(quick ? suite.quick_min_time : suite.full_min_time),
+                                "--benchmark_out=" + json.string(),
+                                "--benchmark_out_format=json"};
+  if (!quick) {
+    argv.push_back("--benchmark_repetitions=" + std::to_string(suite.full_repetitions));
+    argv.push_back("--benchmark_report_aggregates_only=true");
+  }
+  auto skip = [&](const std::string& why) { results.skipped.push_back({suite.name, benchmark, why}); };
+  Finished finished;
+  try {
+    finished = run_program(argv, raw / (suite.name + ".log"), std::chrono::seconds{180}, [&] { progress.tick(); },
+                           [] { return interrupted.load(); });
+  } catch (const std::exception& e) {
+    return skip(e.what());
+  }
+  if (interrupted) return skip("interrupted");
+  if (finished.timed_out) return skip("ran past 180 s and was killed");
+  std::ifstream in{json};
+  std::stringstream text;
+  text << in.rdbuf();
+  if (finished.status != 0 || text.str().empty())
+    return skip("exited with status " + std::to_string(finished.status) + " (see raw/" + suite.name + ".log)");
+  Json report;
+  try {
+    report = parse_json(text.str());
+  } catch (const std::exception& e) {
+    return skip(std::string{"its result could not be read: "} + e.what());
+  }
+  const auto& object = report.object();
+  const auto runs = object.find("benchmarks");
+  if (runs == object.end() || !runs->second.is_array() || runs->second.array().empty())
+    return skip("reported nothing (see raw/" + suite.name + ".log)");
+  // The median of the repetitions, or the only run.
+  const Json* chosen = nullptr;
+  for (const auto& run : runs->second.array()) {
+    const auto& fields = run.object();
+    if (const auto error = fields.find("error_occurred");
+        error != fields.end() && std::holds_alternative<bool>(error->second.value) && std::get<bool>(error->second.value)) {
+      const auto message = fields.find("error_message");
+      return skip(message != fields.end() && std::holds_alternative<std::string>(message->second.value)
+                      ? std::get<std::string>(message->second.value)
+                      : "failed");
+    }
+    const auto aggregate = fields.find("aggregate_name");
+    const bool is_aggregate = aggregate != fields.end();
+    if (!is_aggregate && !chosen) chosen = &run;
+    if (is_aggregate && std::holds_alternative<std::string>(aggregate->second.value) &&
+        std::get<std::string>(aggregate->second.value) == "median")
+      chosen = &run;
+  }
+  if (!chosen) chosen = &runs->second.array().back();
+  const auto before = results.figures.size();
+  suite.read(*chosen, results);
+  if (results.figures.size() == before) skip("its result has no figure this report knows");
+}
+
+}  // namespace
+
+int run(const Options& options) {
+  const std::filesystem::path bin_dir = options.bin_dir;
+  if (bin_dir.empty()) {
+    std::cerr << "prime bench: no benchmark directory: this prime was built without the benchmarks; pass --bin-dir\n";
+    return 2;
+  }
+  const std::filesystem::path out = options.out;
+  const auto raw = out / "raw";
+  std::filesystem::create_directories(raw);
+  interrupted = false;
+  std::signal(SIGINT, [](int) { interrupted = true; });
+
+  const auto machine = this_machine();
+  const auto began = Clock::now();
+  Results results;
+  const auto all = suites();
+  std::vector<Planned> plan;
+  for (const auto& suite : all)
+    for (auto& name : list(suite, bin_dir / suite.binary, options.quick, results)) plan.push_back({&suite, std::move(name)});
+
+  std::cerr << "prime bench: " << plan.size() << " benchmarks" << (options.quick ? " (quick)" : "") << " on " << machine.cpu
+            << ", " << machine.cpus << " CPUs; report in " << out.string() << '\n';
+  Progress progress{plan.size()};
+  for (std::size_t i = 0; i < plan.size() && !interrupted; ++i) {
+    const auto& [suite, benchmark] = plan[i];
+    progress.start(i, suite->name, benchmark);
+    const auto t = Clock::now();
+    run_one(*suite, bin_dir / suite->binary, benchmark, options.quick, raw, i, progress, results);
+    progress.finish(Clock::now() - t);
+  }
+  progress.end();
+
+  const RunInfo info{.quick = options.quick,
+                     .interrupted = interrupted.load(),
+                     .took = std::chrono::duration_cast<std::chrono::seconds>(Clock::now() - began),
+                     .benchmarks = plan.size()};
+  const auto written = write_report(out, results, machine, info);
+  std::cout << written.headline << "\nReport: " << (out / "summary.md").string() << " (" << results.figures.size()
+            << " figures in figures.csv";
+  if (!written.plots.empty()) std::cout << ", " << written.plots.size() << " plots";
+  std::cout << ")\n";
+  if (!written.plot_problem.empty()) std::cerr << "prime bench: plots: " << written.plot_problem << '\n';
+  if (interrupted) return 1;
+  return results.figures.empty() ? 1 : 0;
+}
+
+}  // namespace prime::tool::bench

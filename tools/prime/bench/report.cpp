@@ -1,0 +1,347 @@
+#include "report.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <optional>
+#include <sstream>
+
+namespace prime::tool::bench {
+
+namespace {
+
+std::string number(double v, const char* format = "%.3g") {
+  char text[32];
+  std::snprintf(text, sizeof text, format, v);
+  return text;
+}
+
+std::string ratio_text(std::optional<double> r) { return r ? number(*r) + "×" : "–"; }
+
+// Floors first, then Prime's media, then the peers, each group in the order seen.
+std::vector<std::string> ordered(std::vector<std::string> who) {
+  std::stable_sort(who.begin(), who.end(), [](const std::string& a, const std::string& b) {
+    auto rank = [](const std::string& w) { return is_floor(w) ? 0 : is_prime(w) ? 1 : 2; };
+    return rank(a) < rank(b);
+  });
+  return who;
+}
+
+std::optional<double> divide(std::optional<double> a, std::optional<double> b) {
+  if (!a || !b || *b == 0) return std::nullopt;
+  return *a / *b;
+}
+
+// The figure a table shows and a ratio compares: p50 where there is one, else the mean.
+std::optional<double> central(const Results& r, const std::string& who, const std::string& scenario, std::int64_t payload) {
+  if (auto p50 = r.find(who, scenario, payload, "p50")) return p50;
+  if (auto rate = r.find(who, scenario, payload, "rate")) return rate;
+  if (auto per_hop = r.find(who, scenario, payload, "per hop")) return per_hop;
+  return r.find(who, scenario, payload, "mean");
+}
+
+// The best peer's figure for `scenario` at `payload`: the least time, or the highest rate.
+std::optional<std::pair<std::string, double>> best_peer(const Results& r, const std::string& scenario, std::int64_t payload,
+                                                        bool higher_is_better) {
+  std::optional<std::pair<std::string, double>> best;
+  for (const auto& who : r.who_in(scenario)) {
+    if (!is_peer(who)) continue;
+    const auto v = central(r, who, scenario, payload);
+    if (v && (!best || (higher_is_better ? *v > best->second : *v < best->second))) best = {{who, *v}};
+  }
+  return best;
+}
+
+// A Markdown table of `scenario`: a row per payload, a column per who
+// (p50 / p99 for latencies, the rate for throughputs), and for each of
+// Prime's media its ratio to `floor` and to the best peer.
+std::string scenario_table(const Results& r, const std::string& scenario, const std::string& floor, bool rates) {
+  const auto who = ordered(r.who_in(scenario));
+  if (who.empty()) return "No figures.\n";
+  std::ostringstream out;
+  out << "| payload |";
+  for (const auto& w : who) out << ' ' << w << " |";
+  for (const auto& w : who)
+    if (is_prime(w)) out << ' ' << w << ": ×" << (floor.empty() ? "" : floor + ", ×") << "best peer |";
+  out << "\n|---|";
+  for (std::size_t i = 0; i < who.size(); ++i) out << "---:|";
+  for (const auto& w : who)
+    if (is_prime(w)) out << "---:|";
+  out << '\n';
+  for (const auto payload : r.payloads_in(scenario)) {
+    out << "| " << size_text(payload) << " |";
+    for (const auto& w : who) {
+      if (rates) {
+        const auto v = r.find(w, scenario, payload, "rate");
+        out << ' ' << (v ? rate_text(*v) : "–") << " |";
+      } else {
+        const auto p50 = r.find(w, scenario, payload, "p50");
+        const auto p99 = r.find(w, scenario, payload, "p99");
+        const auto mean = r.find(w, scenario, payload, "mean");
+        out << ' ' << (p50 ? time_text(*p50) : mean ? time_text(*mean) : "–");
+        if (p99) out << " / " << time_text(*p99);
+        out << " |";
+      }
+    }
+    for (const auto& w : who) {
+      if (!is_prime(w)) continue;
+      const auto mine = central(r, w, scenario, payload);
+      const auto best = best_peer(r, scenario, payload, rates);
+      out << ' ';
+      if (!floor.empty()) out << ratio_text(divide(mine, central(r, floor, scenario, payload))) << ", ";
+      out << ratio_text(divide(mine, best ? std::optional<double>{best->second} : std::nullopt));
+      if (best) out << " (" << best->first << ')';
+      out << " |";
+    }
+    out << '\n';
+  }
+  return out.str();
+}
+
+// The distributions behind a scenario's table: every percentile, per who and payload.
+std::string distribution_table(const Results& r, const std::string& scenario) {
+  const auto who = ordered(r.who_in(scenario));
+  std::ostringstream out;
+  out << "| who | payload | mean | p50 | p90 | p99 | p99.9 | max |\n|---|---|---:|---:|---:|---:|---:|---:|\n";
+  for (const auto& w : who)
+    for (const auto payload : r.payloads_in(scenario)) {
+      if (!r.find(w, scenario, payload, "p50")) continue;
+      out << "| " << w << " | " << size_text(payload) << " |";
+      for (const char* s : {"mean", "p50", "p90", "p99", "p99.9", "max"}) {
+        const auto v = r.find(w, scenario, payload, s);
+        out << ' ' << (v ? time_text(*v) : "–") << " |";
+      }
+      out << '\n';
+    }
+  return out.str();
+}
+
+// Fan-out, competing load and sleeping subscribers: one row per scenario.
+std::string scenarios_table(const Results& r) {
+  std::ostringstream out;
+  bool any = false;
+  out << "| scenario | who | p50 | p99 | p99.9 | max | publish | CPU per message |\n"
+         "|---|---|---:|---:|---:|---:|---:|---:|\n";
+  std::vector<std::string> scenarios;
+  for (const auto& f : r.figures)
+    if ((f.scenario.starts_with("fan-out") || f.scenario.starts_with("sleeping-") || f.scenario == "latency-loaded") &&
+        std::find(scenarios.begin(), scenarios.end(), f.scenario) == scenarios.end())
+      scenarios.push_back(f.scenario);
+  for (const auto& scenario : scenarios)
+    for (const auto& w : r.who_in(scenario))
+      for (const auto payload : r.payloads_in(scenario)) {
+        any = true;
+        out << "| " << scenario << " | " << w << " |";
+        for (const char* stat : {"p50", "p99", "p99.9", "max", "publish", "cpu per message"}) {
+          const auto v = r.find(w, scenario, payload, stat);
+          out << ' ' << (v ? time_text(*v) : "–") << " |";
+        }
+        out << '\n';
+      }
+  if (!any) return "No figures.\n";
+  // The plain busy latency beside the loaded one, from the same run.
+  if (const auto loaded = r.find("Shm", "latency-loaded", 64, "p99"))
+    if (const auto plain = r.find("Shm", "latency", 64, "p99"))
+      out << "\nShm at 64 B under a competing busy process: p99 " << time_text(*loaded) << " against " << time_text(*plain)
+          << " unloaded (" << ratio_text(divide(loaded, plain)) << ").\n";
+  return out.str();
+}
+
+std::string table1_table(const Results& r) {
+  std::vector<std::string> scenarios;
+  for (const auto& f : r.figures)
+    if (f.scenario.starts_with("table1-") && std::find(scenarios.begin(), scenarios.end(), f.scenario) == scenarios.end())
+      scenarios.push_back(f.scenario);
+  if (scenarios.empty()) return "No figures.\n";
+  std::vector<std::string> who;
+  for (const auto& s : scenarios)
+    for (const auto& w : r.who_in(s))
+      if (std::find(who.begin(), who.end(), w) == who.end()) who.push_back(w);
+  std::ostringstream out;
+  out << "ns per hop (chains of 100 services); Radiant and Liberty as a ratio to FOR, Sources to the CCR-like peer "
+         "(as throughput: FOR's time / theirs).\n\n| payload | lanes |";
+  for (const auto& w : who) out << ' ' << w << " |";
+  out << " Radiant/FOR | Liberty/FOR | Sources throughput / CCR-like |\n|---|---|";
+  for (std::size_t i = 0; i < who.size() + 3; ++i) out << "---:|";
+  out << '\n';
+  for (const auto& s : scenarios)
+    for (const auto payload : r.payloads_in(s)) {
+      out << "| " << size_text(payload) << " | " << s.substr(7, s.size() - 11) << " |";
+      for (const auto& w : who) {
+        const auto v = r.find(w, s, payload, "per hop");
+        out << ' ' << (v ? number(*v, "%.1f") : "–") << " |";
+      }
+      const auto for_ = r.find("For", s, payload, "per hop");
+      out << ' ' << ratio_text(divide(r.find("Radiant", s, payload, "per hop"), for_)) << " | "
+          << ratio_text(divide(r.find("Liberty", s, payload, "per hop"), for_)) << " | "
+          << ratio_text(divide(r.find("CcrLike", s, payload, "per hop"), r.find("Sources", s, payload, "per hop"))) << " |\n";
+    }
+  return out.str();
+}
+
+std::string optimus_table(const Results& r) {
+  std::ostringstream out;
+  bool any = false;
+  out << "| who | what | time | rate |\n|---|---|---:|---:|\n";
+  for (const auto& who : {"Optimus", "hiredis"})
+    for (const auto& f : r.figures) {
+      if (f.who != who || f.statistic != "mean") continue;
+      any = true;
+      const auto rate = r.find(f.who, f.scenario, f.payload, "rate");
+      out << "| " << f.who << " | " << f.scenario << (f.payload ? " (" + std::to_string(f.payload) + ")" : "") << " | "
+          << time_text(f.value) << " | " << (rate ? rate_text(*rate) : "–") << " |\n";
+    }
+  if (!any) return "No figures.\n";
+  const auto hop = r.find("Optimus", "hop", 0, "mean");
+  out << "\nOne Optimus hop is " << ratio_text(divide(hop, r.find("hiredis", "request-reply", 0, "mean")))
+      << " a hand-written hiredis request/reply and " << ratio_text(divide(hop, r.find("hiredis", "ping", 0, "mean")))
+      << " a PING round trip.\n";
+  return out.str();
+}
+
+// The worst (largest) ratio of `who` to FOR over every Table 1 row.
+std::optional<double> worst_table1_ratio(const Results& r, const std::string& who) {
+  std::optional<double> worst;
+  for (const auto& f : r.figures)
+    if (f.who == who && f.scenario.starts_with("table1-"))
+      if (const auto ratio = divide(f.value, r.find("For", f.scenario, f.payload, "per hop")))
+        worst = std::max(worst.value_or(0), *ratio);
+  return worst;
+}
+
+std::string headline(const Results& r) {
+  std::ostringstream out;
+  out << "| what | Prime | ratios |\n|---|---:|---|\n";
+  auto row = [&](const std::string& what, std::optional<double> mine, bool is_rate,
+                 std::vector<std::pair<std::string, std::optional<double>>> against) {
+    if (!mine) return;
+    out << "| " << what << " | " << (is_rate ? rate_text(*mine) : time_text(*mine)) << " |";
+    bool first = true;
+    for (const auto& [name, value] : against) {
+      if (!value) continue;
+      out << (first ? " " : " · ") << ratio_text(divide(mine, value)) << ' ' << name;
+      first = false;
+    }
+    out << " |\n";
+  };
+  auto p50 = [&](const std::string& who, const std::string& scenario, std::int64_t payload) {
+    return r.find(who, scenario, payload, "p50");
+  };
+  auto fast_dds = [&](const std::string& scenario, std::int64_t payload, bool rate) {
+    std::optional<double> best;
+    for (const auto* who : {"FastDdsShm", "FastDdsLoan"}) {
+      const auto v = rate ? r.find(who, scenario, payload, "rate") : p50(who, scenario, payload);
+      if (v && (!best || (rate ? *v > *best : *v < *best))) best = v;
+    }
+    return best;
+  };
+  for (const std::int64_t payload : {std::int64_t{64}, std::int64_t{1} << 20})
+    row("Shm one-way latency, " + size_text(payload) + ", p50", p50("Shm", "latency", payload), false,
+        {{"cache-line floor", p50("Floor", "latency", payload)},
+         {"iceoryx", p50("Iceoryx", "latency", payload)},
+         {"Fast DDS (best of SHM, loans)", fast_dds("latency", payload, false)}});
+  row("Shm one-way latency, sleeping reader, 64 B, p50", p50("Shm", "latency-sleeping", 64), false,
+      {{"futex wake floor", p50("FutexWake", "latency-sleeping", 64)},
+       {"iceoryx (WaitSet)", p50("IceoryxWaitSet", "latency-sleeping", 64)}});
+  row("Shm lossless throughput, 64 B", r.find("Shm", "throughput", 64, "rate"), true,
+      {{"iceoryx", r.find("Iceoryx", "throughput", 64, "rate")}, {"Fast DDS", fast_dds("throughput", 64, true)}});
+  row("Shm service round trip, 64 B, p50", p50("ShmService", "round-trip", 64), false,
+      {{"iceoryx request/response", p50("Iceoryx", "round-trip", 64)},
+       {"Unix socket", p50("UnixSocket", "round-trip", 64)}});
+  if (const auto radiant = worst_table1_ratio(r, "Radiant"))
+    out << "| Radiant vs FOR (worst Table 1 row) | | " << ratio_text(radiant) << " |\n";
+  if (const auto liberty = worst_table1_ratio(r, "Liberty"))
+    out << "| Liberty vs FOR (worst Table 1 row) | | " << ratio_text(liberty) << " |\n";
+  row("Optimus hop", r.find("Optimus", "hop", 0, "mean"), false,
+      {{"hiredis request/reply", r.find("hiredis", "request-reply", 0, "mean")},
+       {"PING", r.find("hiredis", "ping", 0, "mean")}});
+  return out.str();
+}
+
+}  // namespace
+
+std::string time_text(double ns) {
+  if (ns >= 1e6) return number(ns / 1e6) + " ms";
+  if (ns >= 1e3) return number(ns / 1e3) + " µs";
+  return number(ns, "%.0f") + " ns";
+}
+
+std::string rate_text(double per_second) {
+  if (per_second >= 1e6) return number(per_second / 1e6) + " M/s";
+  if (per_second >= 1e3) return number(per_second / 1e3) + " k/s";
+  return number(per_second) + " /s";
+}
+
+std::string size_text(std::int64_t bytes) {
+  if (bytes >= (1 << 20) && bytes % (1 << 20) == 0) return std::to_string(bytes >> 20) + " MiB";
+  if (bytes >= 1024 && bytes % 1024 == 0) return std::to_string(bytes >> 10) + " KiB";
+  return std::to_string(bytes) + " B";
+}
+
+Written write_report(const std::filesystem::path& dir, const Results& results, const Machine& machine,
+                     const RunInfo& info) {
+  std::filesystem::create_directories(dir);
+  {
+    std::ofstream csv{dir / "figures.csv"};
+    csv << "who,scenario,payload,statistic,value,unit\n";
+    for (const auto& f : results.figures)
+      csv << f.who << ',' << f.scenario << ',' << f.payload << ',' << f.statistic << ',' << number(f.value, "%.6g") << ','
+          << f.unit << '\n';
+  }
+  Written written;
+  written.plots = write_plots(dir, results, written.plot_problem);
+  written.headline = headline(results);
+
+  std::ofstream md{dir / "summary.md"};
+  const auto minutes = info.took.count() / 60, seconds = info.took.count() % 60;
+  md << "# Prime: what each hop costs\n\n"
+     << "Measured " << machine.date << " on " << machine.cpu << " (" << machine.cpus << " CPUs, " << machine.memory
+     << "), " << machine.kernel << ". " << (info.quick ? "Quick run" : "Full run") << ": " << info.benchmarks
+     << " benchmarks in " << minutes << " min " << seconds << " s" << (info.interrupted ? ", INTERRUPTED (partial)" : "")
+     << ". Reproduce with `prime bench" << (info.quick ? " --quick" : "") << "`.\n\n"
+     << (info.quick ? "Each figure is from one short run (noisy: use the full run for numbers to quote). "
+                    : "Each figure is the median of 3 runs. ")
+     << "Latency is one way (half a round trip); its percentiles come from every round trip's own timing. "
+        "Every ratio compares figures of this one run: the machine is shared and noisy, so compare ratios, not "
+        "absolute times, between runs. Cells: p50 / p99.\n\n"
+     << "## Headline\n\n" << written.headline << '\n';
+  auto image = [&](const std::string& name, const std::string& alt) {
+    if (std::find(written.plots.begin(), written.plots.end(), name) != written.plots.end())
+      md << "![" << alt << "](plots/" << name << ".svg)\n\n";
+  };
+  md << "## One-way latency, busy readers\n\n";
+  image("latency", "one-way latency against payload");
+  md << scenario_table(results, "latency", "Floor", false) << '\n';
+  image("latency-distribution-64", "latency percentiles at 64 B");
+  image("latency-distribution-1MiB", "latency percentiles at 1 MiB");
+  md << distribution_table(results, "latency") << '\n';
+  md << "## One-way latency, sleeping readers\n\nThe floor is one futex wake between the two processes.\n\n"
+     << scenario_table(results, "latency-sleeping", "FutexWake", false) << '\n'
+     << distribution_table(results, "latency-sleeping") << '\n';
+  md << "## Throughput, lossless\n\n";
+  image("throughput", "throughput against payload");
+  md << scenario_table(results, "throughput", "", true) << '\n';
+  md << "## Service round trip\n\n";
+  image("service", "service round trip against payload");
+  md << scenario_table(results, "round-trip", "", false) << '\n' << distribution_table(results, "round-trip") << '\n';
+  md << "## Fan-out, competing load, sleeping subscribers\n\n";
+  image("fan-out", "fan-out");
+  image("sleeping", "sleeping subscribers");
+  md << scenarios_table(results) << '\n';
+  md << "## Table 1: chains in one process\n\n";
+  image("table1", "Table 1");
+  md << table1_table(results) << '\n';
+  md << "## Optimus (Redis)\n\n";
+  image("optimus", "Optimus against hiredis");
+  md << optimus_table(results) << '\n';
+  md << "## Skipped\n\n";
+  if (results.skipped.empty() && written.plot_problem.empty()) md << "Nothing.\n";
+  for (const auto& s : results.skipped)
+    md << "- " << s.suite << (s.benchmark.empty() ? "" : " " + s.benchmark) << ": " << s.reason << '\n';
+  if (!written.plot_problem.empty()) md << "- plots: " << written.plot_problem << '\n';
+  return written;
+}
+
+}  // namespace prime::tool::bench

@@ -1,0 +1,64 @@
+#pragma once
+
+// What `prime bench` measured: one Figure per number (the report's CSV rows),
+// and what could not run, with the reason.
+
+#include <algorithm>
+#include <cstdint>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+namespace prime::tool::bench {
+
+struct Figure {
+  std::string who;        // a medium of Prime (Shm, ShmService, Radiant...) or a peer (Floor, Iceoryx, FastDdsShm...)
+  std::string scenario;   // latency, latency-sleeping, throughput, round-trip, fan-out-4, table1-1lane, hop...
+  std::int64_t payload;   // bytes (0: none)
+  std::string statistic;  // mean, p50, p90, p99, p99.9, max, rate, per hop, publish, cpu per message
+  double value;
+  std::string unit;  // ns, msgs/s, calls/s
+};
+
+struct Skipped {
+  std::string suite;
+  std::string benchmark;  // empty: the whole suite
+  std::string reason;
+};
+
+struct Results {
+  std::vector<Figure> figures;
+  std::vector<Skipped> skipped;
+
+  [[nodiscard]] std::optional<double> find(const std::string& who, const std::string& scenario, std::int64_t payload,
+                                           const std::string& statistic) const {
+    for (const auto& f : figures)
+      if (f.who == who && f.scenario == scenario && f.payload == payload && f.statistic == statistic) return f.value;
+    return std::nullopt;
+  }
+  // Who has figures for `scenario`, in the order first seen.
+  [[nodiscard]] std::vector<std::string> who_in(const std::string& scenario) const {
+    std::vector<std::string> all;
+    for (const auto& f : figures)
+      if (f.scenario == scenario && std::find(all.begin(), all.end(), f.who) == all.end()) all.push_back(f.who);
+    return all;
+  }
+  // The payloads measured for `scenario`, rising.
+  [[nodiscard]] std::vector<std::int64_t> payloads_in(const std::string& scenario) const {
+    std::set<std::int64_t> all;
+    for (const auto& f : figures)
+      if (f.scenario == scenario) all.insert(f.payload);
+    return {all.begin(), all.end()};
+  }
+};
+
+// Roles in the comparisons: Prime's own media, the floors a medium cannot
+// beat, and the peers a user would pick instead.
+inline bool is_floor(const std::string& who) { return who == "Floor" || who == "FutexWake"; }
+inline bool is_prime(const std::string& who) {
+  return who.starts_with("Shm") || who == "Optimus" || who == "Radiant" || who == "Liberty" || who.starts_with("Sources");
+}
+inline bool is_peer(const std::string& who) { return !is_floor(who) && !is_prime(who); }
+
+}  // namespace prime::tool::bench

@@ -1,0 +1,162 @@
+#include "suites.hpp"
+
+#include <cctype>
+#include <cstdint>
+#include <cstdlib>
+#include <map>
+
+namespace prime::tool::bench {
+
+namespace {
+
+// "BM_Latency_Shm/64/real_time" -> {"BM_Latency_Shm", "64", "real_time"}
+std::vector<std::string> name_parts(const Json& run) {
+  const auto& object = run.object();
+  const auto it = object.find("run_name");
+  const std::string name = it != object.end() && std::holds_alternative<std::string>(it->second.value)
+                               ? std::get<std::string>(it->second.value)
+                               : "";
+  std::vector<std::string> parts;
+  std::size_t from = 0;
+  while (true) {
+    const auto slash = name.find('/', from);
+    parts.push_back(name.substr(from, slash - from));
+    if (slash == std::string::npos) break;
+    from = slash + 1;
+  }
+  if (!parts.empty() && parts[0].starts_with("BM_")) parts[0].erase(0, 3);
+  return parts;
+}
+
+std::int64_t integer(const std::string& text) {
+  if (text.empty() || !std::isdigit(static_cast<unsigned char>(text[0]))) return 0;
+  return std::strtoll(text.c_str(), nullptr, 10);
+}
+
+// The run's time per iteration, in nanoseconds.
+std::optional<double> real_time_ns(const Json& run) {
+  const double* t = number(run, "real_time");
+  if (!t) return std::nullopt;
+  const auto& object = run.object();
+  const auto unit = object.find("time_unit");
+  const std::string u = unit != object.end() && std::holds_alternative<std::string>(unit->second.value)
+                            ? std::get<std::string>(unit->second.value)
+                            : "ns";
+  const double scale = u == "us" ? 1e3 : u == "ms" ? 1e6 : u == "s" ? 1e9 : 1.0;
+  return *t * scale;
+}
+
+// Counters named <statistic>_ns (one_way_ns and last_ns are means), and
+// rates, as the harness of prime_ipc reports them; `scale` multiplies times
+// (2 turns a one-way time into a round trip).
+void add_counters(const Json& run, const std::string& who, const std::string& scenario, std::int64_t payload,
+                  double scale, Results& out) {
+  static const std::map<std::string, std::string> kTimes{
+      {"one_way_ns", "mean"}, {"last_ns", "mean"}, {"p50_ns", "p50"},       {"p90_ns", "p90"},
+      {"p99_ns", "p99"},      {"p999_ns", "p99.9"}, {"max_ns", "max"},      {"publish_ns", "publish"},
+  };
+  for (const auto& [key, statistic] : kTimes)
+    if (const double* v = number(run, key)) out.figures.push_back({who, scenario, payload, statistic, *v * scale, "ns"});
+  if (const double* v = number(run, "cpu_ns_per_msg"))
+    out.figures.push_back({who, scenario, payload, "cpu per message", *v, "ns"});
+  if (const double* v = number(run, "msgs/s")) out.figures.push_back({who, scenario, payload, "rate", *v, "msgs/s"});
+  if (const double* v = number(run, "calls/s")) out.figures.push_back({who, scenario, payload, "rate", *v, "calls/s"});
+}
+
+// prime_ipc: BM_<Kind>_<Who>/<argument>.
+void read_ipc(const Json& run, Results& out) {
+  const auto parts = name_parts(run);
+  const auto underscore = parts[0].find('_');
+  if (underscore == std::string::npos || parts.size() < 2) return;
+  const std::string kind = parts[0].substr(0, underscore);
+  std::string who = parts[0].substr(underscore + 1);
+  const auto argument = integer(parts[1]);
+  std::string suffix;
+  if (who.ends_with("Sleeping")) {  // ShmSleeping, ShmServiceSleeping: the same medium, its reader asleep
+    who.erase(who.size() - 8);
+    suffix = "-sleeping";
+  }
+  if (who == "FutexWake" || who == "IceoryxWaitSet") suffix = "-sleeping";  // their readers sleep too
+  if (kind == "Latency") add_counters(run, who, "latency" + suffix, argument, 1, out);
+  else if (kind == "Loaded") add_counters(run, who, "latency-loaded", argument, 1, out);
+  else if (kind == "Throughput") add_counters(run, who, "throughput", argument, 1, out);
+  else if (kind == "RoundTrip") add_counters(run, who, "round-trip" + suffix, argument, 2, out);
+  else if (kind == "Calls") add_counters(run, who, "calls-" + parts[1] + "-clients", 64, 1, out);
+  else if (kind == "FanOut") add_counters(run, who, "fan-out-" + parts[1], 64, 1, out);
+  else if (kind == "Sleeping") add_counters(run, who, "sleeping-" + parts[1] + "hz", 64, 1, out);
+}
+
+// prime_table1: BM_<Who>/<payload>/<lanes>, ns_per_hop.
+void read_table1(const Json& run, Results& out) {
+  const auto parts = name_parts(run);
+  if (parts.size() < 3) return;
+  if (const double* v = number(run, "ns_per_hop"))
+    out.figures.push_back({parts[0], "table1-" + parts[2] + "lane", integer(parts[1]), "per hop", *v, "ns"});
+}
+
+// prime_optimus_bench: BM_<Optimus|Hiredis>_<What>[/<batch>].
+void read_optimus(const Json& run, Results& out) {
+  const auto parts = name_parts(run);
+  const auto underscore = parts[0].find('_');
+  if (underscore == std::string::npos) return;
+  const std::string who = parts[0].substr(0, underscore) == "Hiredis" ? "hiredis" : parts[0].substr(0, underscore);
+  std::string scenario;
+  for (const char c : parts[0].substr(underscore + 1)) {  // RequestReply -> request-reply
+    if (std::isupper(static_cast<unsigned char>(c)) && !scenario.empty()) scenario += '-';
+    scenario += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  }
+  const auto payload = parts.size() > 1 ? integer(parts[1]) : 0;
+  if (const auto t = real_time_ns(run)) out.figures.push_back({who, scenario, payload, "mean", *t, "ns"});
+  if (const double* v = number(run, "items_per_second")) out.figures.push_back({who, scenario, payload, "rate", *v, "msgs/s"});
+}
+
+}  // namespace
+
+const double* number(const Json& object, const std::string& key) {
+  if (!object.is_object()) return nullptr;
+  const auto it = object.object().find(key);
+  if (it == object.object().end() || !std::holds_alternative<double>(it->second.value)) return nullptr;
+  return &std::get<double>(it->second.value);
+}
+
+std::vector<Suite> suites() {
+  return {
+      {.name = "ipc",
+       .title = "two processes: Shm, its services and their peers",
+       .binary = "ipc/prime_ipc",
+       .quick_filter = "^BM_(Latency|Throughput|RoundTrip)_[A-Za-z]+/(64|1048576)/"
+                       "|^BM_Calls_ShmService/1/|^BM_FanOut_Shm/[14]/|^BM_Loaded_|^BM_Sleeping_Shm/1000/",
+       .full_filter = ".",
+       .quick_min_time = 0.05,
+       .full_min_time = 0.2,
+       .full_repetitions = 3,
+       .needs = {},
+       .expected = {{"_FastDds", "prime_ipc was built without Fast DDS (install libfastrtps-dev and rebuild)"},
+                    {"_Iceoryx", "prime_ipc was built without iceoryx"}},
+       .read = read_ipc},
+      {.name = "table1",
+       .title = "one process: the paper's Table 1 (FOR, Radiant, Liberty, Sources, a CCR-like peer)",
+       .binary = "prime_table1",
+       .quick_filter = "/(100|10240)/",
+       .full_filter = ".",
+       .quick_min_time = 0.02,
+       .full_min_time = 0.2,
+       .full_repetitions = 3,
+       .needs = {},
+       .expected = {},
+       .read = read_table1},
+      {.name = "optimus",
+       .title = "Redis: Optimus against bare hiredis",
+       .binary = "optimus/prime_optimus_bench",
+       .quick_filter = ".",
+       .full_filter = ".",
+       .quick_min_time = 0.05,
+       .full_min_time = 0.5,
+       .full_repetitions = 3,
+       .needs = {"redis-server"},
+       .expected = {},
+       .read = read_optimus},
+  };
+}
+
+}  // namespace prime::tool::bench
