@@ -201,6 +201,51 @@ std::string optimus_table(const Results& r) {
   return out.str();
 }
 
+// The paper's two tests: availability per request period and extra
+// clients, and response times with their outliers, per payload.
+std::string availability_tables(const Results& r) {
+  std::vector<std::string> availability, response;
+  for (const auto& f : r.figures) {
+    auto& list = f.scenario.starts_with("availability-") ? availability : response;
+    if ((f.scenario.starts_with("availability-") || f.scenario.starts_with("response-")) &&
+        std::find(list.begin(), list.end(), f.scenario) == list.end())
+      list.push_back(f.scenario);
+  }
+  if (availability.empty() && response.empty()) return "No figures.\n";
+  std::ostringstream out;
+  if (!availability.empty()) {
+    out << "Availability: requests executed / requests sent, sent asynchronously every period.\n\n"
+           "| who | configuration | payload | availability | sent |\n|---|---|---:|---:|---:|\n";
+    for (const auto& scenario : availability)
+      for (const auto& who : r.who_in(scenario))
+        for (const auto chars : r.payloads_in(scenario)) {
+          const auto a = r.find(who, scenario, chars, "availability");
+          const auto sent = r.find(who, scenario, chars, "sent");
+          if (!a) continue;
+          out << "| " << who << " | " << scenario.substr(13) << " | " << chars << " chars | " << number(*a * 100, "%.1f")
+              << " % | " << (sent ? number(*sent, "%.0f") : "–") << " |\n";
+        }
+    out << '\n';
+  }
+  if (!response.empty()) {
+    out << "Response time of synchronous calls; outliers (above 10× the median) are counted, not dropped.\n\n"
+           "| who | configuration | payload | mean | p50 | p99 | max | outliers |\n|---|---|---:|---:|---:|---:|---:|---:|\n";
+    for (const auto& scenario : response)
+      for (const auto& who : r.who_in(scenario))
+        for (const auto chars : r.payloads_in(scenario)) {
+          out << "| " << who << " | " << scenario.substr(9) << " | " << chars << " chars |";
+          for (const char* stat : {"mean", "p50", "p99", "max"}) {
+            const auto v = r.find(who, scenario, chars, stat);
+            out << ' ' << (v ? time_text(*v) : "–") << " |";
+          }
+          const auto n = r.find(who, scenario, chars, "outliers");
+          const auto share = r.find(who, scenario, chars, "outlier share");
+          out << ' ' << (n ? number(*n, "%.0f") : "–") << (share ? " (" + number(*share * 100, "%.1f") + " %)" : "") << " |\n";
+        }
+  }
+  return out.str();
+}
+
 // The worst (largest) ratio of `who` to FOR over every Table 1 row.
 std::optional<double> worst_table1_ratio(const Results& r, const std::string& who) {
   std::optional<double> worst;
@@ -336,6 +381,7 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
   md << "## Optimus (Redis)\n\n";
   image("optimus", "Optimus against hiredis");
   md << optimus_table(results) << '\n';
+  md << "## Services under load (after the communication-architecture paper)\n\n" << availability_tables(results) << '\n';
   md << "## Skipped\n\n";
   if (results.skipped.empty() && written.plot_problem.empty()) md << "Nothing.\n";
   for (const auto& s : results.skipped)

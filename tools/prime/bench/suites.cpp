@@ -110,6 +110,33 @@ void read_optimus(const Json& run, Results& out) {
   if (const double* v = number(run, "items_per_second")) out.figures.push_back({who, scenario, payload, "rate", *v, "msgs/s"});
 }
 
+// prime_availability: BM_Availability_<Medium>/<period ms>/<chars>/<extra clients>
+// and BM_Response_<Medium>/<chars>/<extra clients>.
+void read_availability(const Json& run, Results& out) {
+  const auto parts = name_parts(run);
+  const auto underscore = parts[0].find('_');
+  if (underscore == std::string::npos) return;
+  const std::string kind = parts[0].substr(0, underscore);
+  std::string who = parts[0].substr(underscore + 1);
+  if (who == "Shm") who = "ShmService";
+  if (kind == "Availability" && parts.size() >= 4) {
+    const std::string scenario = "availability-" + parts[1] + "ms-" + parts[3] + "clients";
+    if (const double* v = number(run, "availability"))
+      out.figures.push_back({who, scenario, integer(parts[2]), "availability", *v, "fraction"});
+    if (const double* v = number(run, "sent")) out.figures.push_back({who, scenario, integer(parts[2]), "sent", *v, "requests"});
+  } else if (kind == "Response" && parts.size() >= 3) {
+    const std::string scenario = "response-" + parts[2] + "clients";
+    static const std::map<std::string, std::string> kTimes{
+        {"mean_ns", "mean"}, {"p50_ns", "p50"}, {"p99_ns", "p99"}, {"max_ns", "max"}};
+    for (const auto& [key, statistic] : kTimes)
+      if (const double* v = number(run, key)) out.figures.push_back({who, scenario, integer(parts[1]), statistic, *v, "ns"});
+    if (const double* v = number(run, "outliers"))
+      out.figures.push_back({who, scenario, integer(parts[1]), "outliers", *v, "samples"});
+    if (const double* v = number(run, "outlier_share"))
+      out.figures.push_back({who, scenario, integer(parts[1]), "outlier share", *v, "fraction"});
+  }
+}
+
 }  // namespace
 
 const double* number(const Json& object, const std::string& key) {
@@ -156,6 +183,17 @@ std::vector<Suite> suites() {
        .needs = {"redis-server"},
        .expected = {},
        .read = read_optimus},
+      {.name = "availability",
+       .title = "services after the paper: availability under load, response times with their outliers",
+       .binary = "availability/prime_availability",
+       .quick_filter = "^BM_Availability_[A-Za-z]+/10/(10|20000)/|^BM_Response_[A-Za-z]+/(10|20000)/",
+       .full_filter = ".",
+       .quick_min_time = 0.01,  // each runs once, for a fixed number of requests
+       .full_min_time = 0.01,
+       .full_repetitions = 1,
+       .needs = {},
+       .expected = {},
+       .read = read_availability},
   };
 }
 
