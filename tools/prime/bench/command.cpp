@@ -206,6 +206,9 @@ int run(const Options& options) {
   Results results;
   const auto all = suites();
   std::vector<Planned> plan;
+  if (options.quick)
+    for (const auto& suite : all)
+      for (const auto& [name, value] : suite.quick_env) ::setenv(name.c_str(), value.c_str(), 0);
   for (const auto& suite : all)
     for (auto& name : list(suite, bin_dir / suite.binary, options.quick, results)) plan.push_back({&suite, std::move(name)});
 

@@ -160,6 +160,7 @@ std::vector<Suite> suites() {
        .needs = {},
        .expected = {{"_FastDds", "prime_ipc was built without Fast DDS (install libfastrtps-dev and rebuild)"},
                     {"_Iceoryx", "prime_ipc was built without iceoryx"}},
+       .quick_env = {},
        .read = read_ipc},
       {.name = "table1",
        .title = "one process: the paper's Table 1 (FOR, Radiant, Liberty, Sources, a CCR-like peer)",
@@ -171,6 +172,7 @@ std::vector<Suite> suites() {
        .full_repetitions = 3,
        .needs = {},
        .expected = {},
+       .quick_env = {},
        .read = read_table1},
       {.name = "optimus",
        .title = "Redis: Optimus against bare hiredis",
@@ -182,6 +184,7 @@ std::vector<Suite> suites() {
        .full_repetitions = 3,
        .needs = {"redis-server"},
        .expected = {},
+       .quick_env = {},
        .read = read_optimus},
       {.name = "availability",
        .title = "services after the paper: availability under load, response times with their outliers",
@@ -193,6 +196,7 @@ std::vector<Suite> suites() {
        .full_repetitions = 1,
        .needs = {},
        .expected = {},
+       .quick_env = {{"PRIME_AVAILABILITY_REQUESTS", "40"}},
        .read = read_availability},
   };
 }

@@ -28,6 +28,8 @@ struct Suite {
   // Benchmarks (a part of their names) a full build has, with the reason
   // to report when the binary lacks them (a peer it was built without).
   std::vector<std::pair<std::string, std::string>> expected;
+  // Environment the quick mode gives the binary (fewer requests, say).
+  std::vector<std::pair<std::string, std::string>> quick_env;
   // Adds the figures of one benchmark's result (a Google Benchmark JSON run,
   // the median of its repetitions when there are several).
   std::function<void(const Json& run, Results&)> read;
