@@ -396,9 +396,12 @@ class Loans {
     return true;
   }
 
-  void drain(dds::DataReader& reader) {
-    while (reader.take(samples_, infos_) == ReturnCode::RETCODE_OK) reader.return_loan(samples_, infos_);
-  }
+  // Takes nothing: returning a loan while the writer's process is exiting
+  // crashes inside Fast DDS 2.9 (DataReaderImpl::return_loan calls through a
+  // null pointer once the writer's pool is gone: seen in about 1 run in 30).
+  // The writer needs no drain to stop: its write() gives up after
+  // max_blocking_time (100 ms) and it then sees the request to stop.
+  void drain(dds::DataReader&) {}
 
  private:
   // A loaned sample; returned to the writer's pool unless it was written.
