@@ -10,7 +10,7 @@
 //
 // Arguments: payload bytes, width (1, or 2 chains side by side). Each reports
 // `ns_per_hop`: time per message and hop, CPU time for the one-thread peers and
-// wall time for the threaded ones. bench/table1.sh makes the table.
+// wall time for the threaded ones. `prime bench` makes the table.
 
 #include <benchmark/benchmark.h>
 

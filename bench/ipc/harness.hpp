@@ -61,8 +61,8 @@
 // Stopped. A child is always reaped.
 //
 // Names: BM_Latency_<Peer>/<bytes> and BM_Throughput_<Peer>/<bytes>, which
-// bench/ipc.sh reads; it already has columns for Shm, ShmSleeping (latency)
-// and Shm (throughput).
+// `prime bench` reads (tools/prime/bench/report.cpp): a new peer appears in
+// its tables and plots under its own name.
 
 #include <benchmark/benchmark.h>
 

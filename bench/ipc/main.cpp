@@ -1,5 +1,5 @@
 // prime_ipc: one-way latency and throughput between two processes, for
-// Prime's Shm medium and its peers, in one run. bench/ipc.sh makes the table;
+// Prime's Shm medium and its peers, in one run. `prime bench` makes the report;
 // harness.hpp says how a peer plugs in.
 //
 //   prime_ipc [--ipc_no_pin] [--benchmark_*...]
