@@ -11,11 +11,18 @@
 //   BM_Optimus_Publish           a source's values appended one round trip each
 //   BM_Optimus_PublishPipelined  the same in batches of 64, one round trip per batch
 //   BM_Optimus_SourceThroughput  batches published and read back by a reader
+//   BM_RedisBenchmark_XaddPipelined  the server's own tool, `redis-benchmark
+//                                -P 64` (50 clients), appending entries like
+//                                Prime's (n, t, d of the same size), untrimmed:
+//                                the most XADDs this server takes, the peer of
+//                                PublishPipelined (which also trims its stream)
 //
 // The binary starts its own redis-server (persistence off) on a free loopback port.
 #include <benchmark/benchmark.h>
 
 #include <atomic>
+#include <expected>
+#include <cstdio>
 #include <memory>
 #include <string>
 #include <thread>
@@ -200,6 +207,43 @@ void BM_Optimus_SourceThroughput(benchmark::State& state) {
   state.SetItemsProcessed(received);
 }
 BENCHMARK(BM_Optimus_SourceThroughput)->Arg(64)->UseRealTime();
+
+// What redis-benchmark reports for `args` (requests per second), or an
+// error that says why there is none.
+std::expected<double, std::string> redis_benchmark(const std::string& args) {
+  const std::string command = std::string{PRIME_REDIS_BENCHMARK} + " -h 127.0.0.1 -p " + std::to_string(server().port()) +
+                              " -q " + args + " 2>&1";
+  std::unique_ptr<FILE, int (*)(FILE*)> out{::popen(command.c_str(), "r"), ::pclose};
+  if (!out) return std::unexpected("cannot start " + command);
+  std::string text;
+  char buffer[512];
+  while (std::fgets(buffer, sizeof buffer, out.get())) text += buffer;
+  // "XADD ...: 123456.78 requests per second, p50=..." after progress lines ending in \r
+  const auto at = text.rfind(" requests per second");
+  const auto colon = at == std::string::npos ? at : text.rfind(": ", at);
+  if (colon == std::string::npos) return std::unexpected("redis-benchmark said: " + text);
+  return std::stod(text.substr(colon + 2, at - colon - 2));
+}
+
+void BM_RedisBenchmark_XaddPipelined(benchmark::State& state) {
+  const auto pipeline = state.range(0);
+  constexpr int kRequests = 100000;
+  // An entry as Prime writes one for an Imu: n, a stamp, the encoded value.
+  const std::string entry = "n 1 t 1000000000000 d " + std::string(57, 'x');
+  const std::string args = "-P " + std::to_string(pipeline) + " -n " + std::to_string(kRequests) +
+                           " XADD bench-xadd '*' " + entry;
+  for (auto _ : state) {
+    const auto rate = redis_benchmark(args);
+    if (!rate) {
+      state.SkipWithError(rate.error().c_str());
+      break;
+    }
+    state.SetIterationTime(kRequests / *rate);
+  }
+  state.SetItemsProcessed(state.iterations() * kRequests);
+  (void)redis_benchmark("-n 1 DEL bench-xadd");
+}
+BENCHMARK(BM_RedisBenchmark_XaddPipelined)->Arg(64)->UseManualTime()->Iterations(3);
 
 }  // namespace
 

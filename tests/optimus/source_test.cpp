@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <span>
 #include <string>
 #include <thread>
 #include <tuple>
@@ -59,6 +60,46 @@ TEST_F(OptimusSource, PipelinedPublishingAppendsEveryValueInOrder) {
   auto all = reader.read_all();
   ASSERT_EQ(all.size(), 500u);
   for (int i = 0; i < 500; ++i) ASSERT_EQ(all[static_cast<std::size_t>(i)].value, i);
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
+TEST_F(OptimusSource, BatchesContinueTheSequenceTrimTheStreamAndCountWhatTrimmingTook) {
+  optimus::Core core{options()};
+  auto pub = core.publisher<int>("imu", {.capacity = 100});
+  auto reader = pub.source().subscribe({.capacity = 1000});
+  for (int i = 0; i < 10; ++i) ASSERT_TRUE(pub.publish(i));
+  ASSERT_EQ(reader.read_all().size(), 10u);
+  std::vector<Sample<int>> batch;
+  for (int i = 10; i < 310; ++i) batch.push_back({i, Clock::time_point{std::chrono::milliseconds{i}}});
+  ASSERT_TRUE(pub.publish_all(batch));  // two calls of the batch script, pipelined
+  RawRedis raw{shared_redis().url()};
+  EXPECT_EQ(raw.integer({"XLEN", pub.source().key()}), 100) << "trimmed to the capacity";
+  auto kept = reader.read_all();
+  ASSERT_EQ(kept.size(), 100u);
+  for (std::size_t i = 0; i < kept.size(); ++i) {
+    EXPECT_EQ(kept[i].value, 210 + static_cast<int>(i));
+    EXPECT_EQ(kept[i].stamp, Clock::time_point{std::chrono::milliseconds{210 + i}}) << "each value keeps its stamp";
+  }
+  EXPECT_EQ(reader.lost(), 200u) << "the sequence went on from the single publishes: what trimming took is counted";
+  ASSERT_TRUE(pub.publish(310));
+  auto after = reader.read_all();
+  ASSERT_EQ(after.size(), 1u);
+  EXPECT_EQ(reader.lost(), 200u) << "and a single publish goes on from the batch";
+}
+
+TEST_F(OptimusSource, ABatchSurvivesTheServerForgettingItsScriptAndAppendsEachValueOnce) {
+  optimus::Core core{options()};
+  auto pub = core.publisher<int>("imu", {.capacity = 2000});
+  auto reader = pub.source().subscribe({.capacity = 2000});
+  RawRedis raw{shared_redis().url()};
+  std::vector<Sample<int>> batch;
+  for (int i = 0; i < 600; ++i) batch.push_back({i, Clock::now()});
+  ASSERT_TRUE(pub.publish_all(std::span{batch}.first(300)));
+  raw.command({"SCRIPT", "FLUSH"});  // as a restarted server would have
+  ASSERT_TRUE(pub.publish_all(std::span{batch}.last(300)));
+  auto all = reader.read_all();
+  ASSERT_EQ(all.size(), 600u);
+  for (int i = 0; i < 600; ++i) ASSERT_EQ(all[static_cast<std::size_t>(i)].value, i);
   EXPECT_EQ(reader.lost(), 0u);
 }
 

@@ -185,7 +185,7 @@ std::string optimus_table(const Results& r) {
   std::ostringstream out;
   bool any = false;
   out << "| who | what | time | rate |\n|---|---|---:|---:|\n";
-  for (const auto& who : {"Optimus", "hiredis"})
+  for (const auto& who : {"Optimus", "hiredis", "redis-benchmark"})
     for (const auto& f : r.figures) {
       if (f.who != who || f.statistic != "mean") continue;
       any = true;
@@ -197,7 +197,12 @@ std::string optimus_table(const Results& r) {
   const auto hop = r.find("Optimus", "hop", 0, "mean");
   out << "\nOne Optimus hop is " << ratio_text(divide(hop, r.find("hiredis", "request-reply", 0, "mean")))
       << " a hand-written hiredis request/reply and " << ratio_text(divide(hop, r.find("hiredis", "ping", 0, "mean")))
-      << " a PING round trip.\n";
+      << " a PING round trip.";
+  if (const auto batched = r.find("Optimus", "publish-pipelined", 64, "rate"))
+    out << " Publishing in batches of 64 appends " << rate_text(*batched) << ", "
+        << ratio_text(divide(batched, r.find("redis-benchmark", "xadd-pipelined", 64, "rate")))
+        << " what `redis-benchmark -P 64` achieves for XADD (untrimmed) on the same server.";
+  out << '\n';
   return out.str();
 }
 
@@ -304,6 +309,8 @@ std::string headline(const Results& r) {
   row("Optimus hop", r.find("Optimus", "hop", 0, "mean"), false,
       {{"hiredis request/reply", r.find("hiredis", "request-reply", 0, "mean")},
        {"PING", r.find("hiredis", "ping", 0, "mean")}});
+  row("Optimus publishing, batches of 64", r.find("Optimus", "publish-pipelined", 64, "rate"), true,
+      {{"redis-benchmark XADD -P 64", r.find("redis-benchmark", "xadd-pipelined", 64, "rate")}});
   return out.str();
 }
 

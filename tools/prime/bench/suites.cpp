@@ -94,20 +94,27 @@ void read_table1(const Json& run, Results& out) {
     out.figures.push_back({parts[0], "table1-" + parts[2] + "lane", integer(parts[1]), "per hop", *v, "ns"});
 }
 
-// prime_optimus_bench: BM_<Optimus|Hiredis>_<What>[/<batch>].
+// prime_optimus_bench: BM_<Optimus|Hiredis|RedisBenchmark>_<What>[/<batch>].
 void read_optimus(const Json& run, Results& out) {
   const auto parts = name_parts(run);
   const auto underscore = parts[0].find('_');
   if (underscore == std::string::npos) return;
-  const std::string who = parts[0].substr(0, underscore) == "Hiredis" ? "hiredis" : parts[0].substr(0, underscore);
+  std::string who = parts[0].substr(0, underscore);
+  if (who == "Hiredis") who = "hiredis";
+  if (who == "RedisBenchmark") who = "redis-benchmark";
   std::string scenario;
   for (const char c : parts[0].substr(underscore + 1)) {  // RequestReply -> request-reply
     if (std::isupper(static_cast<unsigned char>(c)) && !scenario.empty()) scenario += '-';
     scenario += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   }
   const auto payload = parts.size() > 1 ? integer(parts[1]) : 0;
-  if (const auto t = real_time_ns(run)) out.figures.push_back({who, scenario, payload, "mean", *t, "ns"});
-  if (const double* v = number(run, "items_per_second")) out.figures.push_back({who, scenario, payload, "rate", *v, "msgs/s"});
+  const double* rate = number(run, "items_per_second");
+  // redis-benchmark's iterations are whole runs of it: its time per request is its rate's inverse.
+  if (who == "redis-benchmark" && rate && *rate > 0)
+    out.figures.push_back({who, scenario, payload, "mean", 1e9 / *rate, "ns"});
+  else if (const auto t = real_time_ns(run))
+    out.figures.push_back({who, scenario, payload, "mean", *t, "ns"});
+  if (rate) out.figures.push_back({who, scenario, payload, "rate", *rate, "msgs/s"});
 }
 
 // prime_availability: BM_Availability_<Medium>/<period ms>/<chars>/<extra clients>

@@ -3,6 +3,7 @@
 #include <hiredis/hiredis.h>
 
 #include <charconv>
+#include <cstddef>
 #include <chrono>
 #include <cstdint>
 #include <optional>
@@ -52,12 +53,38 @@ if ARGV[4] ~= 'drop' then
 end
 if #full > 0 then
   for _, reader in ipairs(full) do redis.call('HINCRBY', KEYS[2], 'l' .. reader, 1) end
-  redis.call('XADD', KEYS[1], 'MAXLEN', ARGV[1], '*', 'n', n, 't', ARGV[2], 'd', ARGV[3], 'x', ',' .. table.concat(full, ',') .. ',')
+  redis.call('XADD', KEYS[1], 'MAXLEN', ARGV[1], '*', 'n', tostring(n), 't', ARGV[2], 'd', ARGV[3], 'x', ',' .. table.concat(full, ',') .. ',')
 else
-  redis.call('XADD', KEYS[1], 'MAXLEN', ARGV[1], '*', 'n', n, 't', ARGV[2], 'd', ARGV[3])
+  redis.call('XADD', KEYS[1], 'MAXLEN', ARGV[1], '*', 'n', tostring(n), 't', ARGV[2], 'd', ARGV[3])
 end
 return {1, #full}
 )lua";
+
+// Appends a batch of entries in one call, as kPublishScript's "drop" mode
+// would one by one (a batch never waits for readers): the last entry's n is
+// read once, and the stream is trimmed once, to exactly ARGV[1] entries.
+//   KEYS: stream.  ARGV: maxlen, then stamp, message for each entry.
+// Returns the number of entries appended. (Both scripts pass n through
+// tostring: redis.call's own conversion of a Lua number costs more.)
+inline constexpr std::string_view kPublishBatchScript = R"lua(
+local n = 0
+local last = redis.call('XREVRANGE', KEYS[1], '+', '-', 'COUNT', 1)
+if #last > 0 then
+  local previous = tonumber(last[1][2][2])
+  if previous then n = previous end
+end
+local appended = 0
+for i = 2, #ARGV - 1, 2 do
+  n = n + 1
+  redis.call('XADD', KEYS[1], '*', 'n', tostring(n), 't', ARGV[i], 'd', ARGV[i + 1])
+  appended = appended + 1
+end
+redis.call('XTRIM', KEYS[1], 'MAXLEN', ARGV[1])
+return appended
+)lua";
+// Entries per call of the batch script: a pipelined batch is sent as calls
+// of this many, so no call holds the server for long.
+inline constexpr std::size_t kBatchEntries = 256;
 
 // The script's modes (ARGV[4]).
 inline constexpr std::string_view kAppendDrop = "drop";

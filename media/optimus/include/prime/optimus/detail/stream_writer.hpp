@@ -1,6 +1,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstddef>
 #include <expected>
@@ -102,30 +103,49 @@ class StreamState {
   }
 
   // Appends many encoded messages in one round trip (drop_oldest semantics:
-  // a batch never waits for readers).
+  // a batch never waits for readers): calls of the batch script, each
+  // appending up to kBatchEntries, pipelined. A call the server refused
+  // because it lost the script (a restart) appended nothing: it is sent
+  // again, the others are not.
   std::expected<void, Error> publish_all(std::span<const std::pair<std::string, Clock::time_point>> messages) {
     auto lease = pool_->acquire();
     if (!lease) return std::unexpected(named(lease.error()));
     auto& c = **lease;
     c.set_timeout(command_timeout());
-    const auto sha = script_sha(c);
-    if (!sha) return std::unexpected(std::move(sha.error()));
-    std::vector<std::string> stamps;
-    stamps.reserve(messages.size());
-    for (const auto& [message, stamp] : messages) {
-      stamps.push_back(std::to_string(stamp_ns(stamp)));
-      c.append({"EVALSHA", *sha, "2", key_, readers_key_, maxlen_, stamps.back(), message, kAppendDrop});
+    std::vector<std::span<const std::pair<std::string, Clock::time_point>>> calls;
+    for (std::size_t i = 0; i < messages.size(); i += kBatchEntries)
+      calls.push_back(messages.subspan(i, std::min(kBatchEntries, messages.size() - i)));
+    for (int attempt = 0; attempt < 2 && !calls.empty(); ++attempt) {
+      const auto sha = script_sha(c, Script::batch);
+      if (!sha) return std::unexpected(std::move(sha.error()));
+      for (const auto& call : calls) {
+        std::vector<std::string> stamps;
+        stamps.reserve(call.size());
+        std::vector<std::string_view> args{"EVALSHA", *sha, "1", key_, maxlen_};
+        for (const auto& [message, stamp] : call) {
+          stamps.push_back(std::to_string(stamp_ns(stamp)));
+          args.push_back(stamps.back());
+          args.push_back(message);
+        }
+        c.append(args);
+      }
+      std::vector<std::span<const std::pair<std::string, Clock::time_point>>> again;
+      std::optional<Error> first_error;
+      for (const auto& call : calls) {
+        auto r = c.reply();
+        if (!r) return std::unexpected(named(r.error()));
+        if (!is_error(**r)) continue;
+        if (text(**r).starts_with("NOSCRIPT"))
+          again.push_back(call);
+        else if (!first_error)
+          first_error = server_error(**r, "source '" + name_ + "': publishing");
+      }
+      if (first_error) return std::unexpected(*first_error);
+      if (!again.empty()) forget_script(Script::batch);
+      calls = std::move(again);
     }
-    std::optional<Error> first_error;
-    for (std::size_t i = 0; i < messages.size(); ++i) {
-      auto r = c.reply();
-      if (!r) return std::unexpected(named(r.error()));
-      if (is_error(**r) && !first_error) first_error = server_error(**r, "source '" + name_ + "': publishing");
-    }
-    if (first_error) {
-      forget_script();
-      return std::unexpected(*first_error);
-    }
+    if (!calls.empty())
+      return std::unexpected(Error{Errc::unreachable, "source '" + name_ + "': the server keeps losing its script"});
     return {};
   }
 
@@ -141,21 +161,24 @@ class StreamState {
  private:
   using ScriptResult = std::pair<bool, long long>;
 
-  std::expected<std::string, Error> script_sha(Connection& c) {
+  enum class Script { one, batch };  // kPublishScript, kPublishBatchScript
+
+  std::expected<std::string, Error> script_sha(Connection& c, Script which = Script::one) {
+    auto& sha = shas_[static_cast<std::size_t>(which)];
     {
       std::scoped_lock lock{mutex_};
-      if (!sha_.empty()) return sha_;
+      if (!sha.empty()) return sha;
     }
-    auto loaded = c.command({"SCRIPT", "LOAD", kPublishScript});
+    auto loaded = c.command({"SCRIPT", "LOAD", which == Script::one ? kPublishScript : kPublishBatchScript});
     if (!loaded) return std::unexpected(named(loaded.error()));
     if (is_error(**loaded)) return std::unexpected(server_error(**loaded, "source '" + name_ + "': loading its script"));
     std::scoped_lock lock{mutex_};
-    sha_ = std::string{text(**loaded)};
-    return sha_;
+    sha = std::string{text(**loaded)};
+    return sha;
   }
-  void forget_script() {
+  void forget_script(Script which = Script::one) {
     std::scoped_lock lock{mutex_};
-    sha_.clear();
+    shas_[static_cast<std::size_t>(which)].clear();
   }
 
   // EVALSHA, loading the script again when the server lost it (a restart).
@@ -190,7 +213,7 @@ class StreamState {
   const std::weak_ptr<prime::detail::RuntimeState> runtime_;
   const std::string maxlen_;
   std::mutex mutex_;
-  std::string sha_;
+  std::array<std::string, 2> shas_;  // SHA1 of each script once loaded, by Script
   prime::Connection upstream_;  // last member: disconnects before the rest goes
 };
 
