@@ -12,12 +12,16 @@
 //   Throughput       the child publishes back-to-back on a `block` topic
 //                    kStreamDepth deep (lossless: it waits for the parent);
 //                    the parent busy-polls, one sample per iteration.
+//   ShmBatch         the same in batches: the child loans and publishes up to
+//                    kBatch at once (loan_some), the parent takes every
+//                    sample available, up to kBatch, in one read_some.
 #include <unistd.h>
 
 #include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "harness.hpp"
 #include "payload.hpp"
@@ -35,6 +39,12 @@ shm::TopicQos latency_qos(std::size_t bytes) { return {.capacity = 4, .max_messa
 shm::TopicQos stream_qos(std::size_t bytes) {
   return {.capacity = ipc::kStreamDepth, .max_message_size = bytes, .overflow = prime::Overflow::block,
           .block_timeout = 10s, .max_subscribers = 1, .max_held = 4};
+}
+constexpr std::size_t kBatch = 32;
+shm::TopicQos batch_qos(std::size_t bytes) {
+  auto qos = stream_qos(bytes);
+  qos.max_held = kBatch;  // the reader holds a whole batch of views at once
+  return qos;
 }
 
 void send(shm::Publisher<shm::Bytes>& publisher, std::size_t bytes, std::uint64_t seq) {
@@ -95,6 +105,23 @@ void stream(ipc::Child& self) {
 }
 const ipc::ChildEntry kStream{"Shm.stream", stream};
 
+void stream_batches(ipc::Child& self) {
+  shm::Core core{self.arg(0)};
+  auto out = core.publisher<shm::Bytes>("stream", batch_qos(self.bytes()));
+  self.ready();
+  for (std::uint64_t seq = 1, checked = 0;;) {
+    if (seq - checked >= 1024) {
+      self.check();
+      checked = seq;
+    }
+    auto batch = out.loan_some(kBatch, self.bytes());
+    if (!batch) throw ipc::PeerError{"shm: " + batch.error().describe()};
+    for (std::size_t i = 0; i < batch->size(); ++i) ipc::stamp(batch->bytes(i).data(), seq++);
+    std::move(*batch).publish();
+  }
+}
+const ipc::ChildEntry kStreamBatches{"Shm.stream_batches", stream_batches};
+
 template <bool kSleeps>
 void latency(benchmark::State& state) {
   ipc::run(state, [&](std::size_t bytes) {
@@ -137,5 +164,35 @@ void BM_Throughput_Shm(benchmark::State& state) {
   });
 }
 BENCHMARK(BM_Throughput_Shm)->Apply(ipc::throughput_payloads);
+
+void BM_Throughput_ShmBatch(benchmark::State& state) {
+  ipc::run(state, [&](std::size_t bytes) {
+    const auto domain = ipc::new_shm_domain();
+    shm::Core core{domain};
+    auto in = core.subscribe<shm::Bytes>("stream", {}, batch_qos(bytes)).subscribe();
+    ipc::Link child{"Shm.stream_batches", bytes, {}, {domain}};
+    std::vector<prime::Sample<shm::View<shm::Bytes>>> taken;
+    taken.reserve(kBatch);
+    std::size_t next = 0;
+    child.set_drain([&] {
+      taken.clear();
+      while (in.try_read()) {
+      }
+    });
+    child.wait_ready();
+    child.go();
+    ipc::time_stream(state, [&](std::uint64_t seq) {
+      if (next == taken.size()) {  // all of the last batch read: let its views go, take the next
+        taken.clear();
+        next = 0;
+        ipc::spin_until(child, [&] { return in.read_some(taken, kBatch, prime::Clock::now()).value_or(0) > 0; });
+      }
+      const auto got = ipc::seq_of(taken[next++].value.bytes().data());
+      if (got != seq) throw ipc::out_of_sequence(seq, got);
+    });
+    child.stop();
+  });
+}
+BENCHMARK(BM_Throughput_ShmBatch)->Apply(ipc::throughput_payloads);
 
 }  // namespace

@@ -14,6 +14,7 @@
 //   shm_peer memory   <domain>                                   a topic too big for /dev/shm, then one that fits
 //   shm_peer checksum_publish <domain> <topic> <count>           heavy overwrite of checksummed payloads
 //   shm_peer sequence_publish <domain> <topic> <count>           block: 0..count-1 as fast as possible
+//   shm_peer batch_publish <domain> <topic> <count>              the same in batches of 1 to 61 (loan_some)
 //   shm_peer leave_segments <domain> <topic>                     create a topic, print, sleep (to be killed)
 //   shm_peer serve    <domain> <service> <echo|twice|plus|hang>  serve until killed (hang: answers nothing, says "running")
 //   shm_peer ticks    <domain> <topic> <hz> <age_ms>             publish Ticks at hz, each stamped age_ms in the past
@@ -24,6 +25,7 @@
 //   shm_peer emitter  <domain>                                   serve "emit": publish an Emit on lidar, odom or odom_x
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <cstdio>
@@ -199,6 +201,18 @@ int main(int argc, char** argv) {
       if (!loan) fail(loan.error().describe());
       **loan = i;
       std::move(*loan).publish();
+    }
+    say("published");
+    return 0;
+  }
+  if (role == "batch_publish" && argc == 5) {
+    auto publisher = core.publisher<std::uint64_t>(topic, test::kSequenceQos);
+    say("ready");
+    for (std::uint64_t i = 0, round = 0; i < arg(4); ++round) {
+      auto batch = publisher.loan_some(std::min<std::uint64_t>(1 + round % 61, arg(4) - i));  // 1 to 61 at a time
+      if (!batch) fail(batch.error().describe());
+      for (std::size_t k = 0; k < batch->size(); ++k) (*batch)[k] = i++;
+      std::move(*batch).publish();
     }
     say("published");
     return 0;

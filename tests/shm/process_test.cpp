@@ -106,7 +106,9 @@ TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleLeavesADropOldestPublishe
   EXPECT_EQ(core.reclaim(), 1u) << "the dead subscriber's slot (and the sample it held) is reclaimed";
 }
 
-TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwrite) {
+// Reads what a publisher process overwrites heavily, one sample at a time
+// or (`batches`) every sample available in one read_some.
+void expect_no_torn_sample(bool batches) {
   const auto domain = unique_domain("torn");
   shm::Core core{domain};
   auto topic = core.subscribe<Checked>("checked", {}, kCheckedQos);
@@ -114,10 +116,18 @@ TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwrite) {
   const MappedTopic mapped{domain, "checked"};
   PeerProcess publisher{{"checksum_publish", domain, "checked", "200000"}};
   std::uint64_t received = 0, torn = 0, last = 0;
+  std::vector<Sample<shm::View<Checked>>> taken;
+  auto next = [&]() -> std::optional<Sample<shm::View<Checked>>> {
+    if (!batches) return reader.try_read();
+    if (taken.empty() && !reader.read_some(taken, kCheckedQos.max_held, Clock::now())) return std::nullopt;
+    auto s = std::move(taken.front());
+    taken.erase(taken.begin());
+    return s;
+  };
   bool done = false;
   while (!done) {
     done = publisher.exit_code(0ms).has_value();  // drain once more after it ends
-    while (auto s = reader.try_read()) {
+    while (auto s = next()) {
       ++received;
       if (!check(*s->value)) ++torn;
       EXPECT_GE(s->value->seq, last);
@@ -136,11 +146,17 @@ TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwrite) {
   EXPECT_EQ(received + reader.lost(), 200000u) << "every sample is either delivered whole or counted lost";
 }
 
-TEST(ShmProcesses, BlockDeliversEveryMessageAcrossProcessesWithNoGapOrDuplicate) {
+TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwrite) { expect_no_torn_sample(false); }
+
+TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwriteToABatchReader) { expect_no_torn_sample(true); }
+
+// A publisher process runs `role` (sequence_publish or batch_publish): this
+// process reads 0..count-1 in batches and checks each.
+void expect_every_message_in_order(const std::string& role) {
   const auto domain = unique_domain("sequence");
   shm::Core core{domain};
   auto reader = core.subscribe<std::uint64_t>("seq", {}, kSequenceQos).subscribe();
-  PeerProcess publisher{{"sequence_publish", domain, "seq", std::to_string(PRIME_SHM_SEQUENCE_COUNT)}};
+  PeerProcess publisher{{role, domain, "seq", std::to_string(PRIME_SHM_SEQUENCE_COUNT)}};
   ASSERT_TRUE(publisher.says("ready"));
   std::uint64_t expected = 0, wrong = 0;
   std::vector<Sample<shm::View<std::uint64_t>>> batch;
@@ -157,6 +173,14 @@ TEST(ShmProcesses, BlockDeliversEveryMessageAcrossProcessesWithNoGapOrDuplicate)
   EXPECT_EQ(reader.lost(), 0u);
   EXPECT_EQ(publisher.exit_code(), 0);
   EXPECT_FALSE(reader.try_read()) << "nothing beyond the last message";
+}
+
+TEST(ShmProcesses, BlockDeliversEveryMessageAcrossProcessesWithNoGapOrDuplicate) {
+  expect_every_message_in_order("sequence_publish");
+}
+
+TEST(ShmProcesses, BatchesOfEverySizeDeliverEveryMessageAcrossProcessesInOrder) {
+  expect_every_message_in_order("batch_publish");
 }
 
 TEST(ShmProcesses, SegmentsLeftByADeadRunAreCleanedWhenTheDomainStarts) {

@@ -312,6 +312,97 @@ TEST_F(ShmTest, ALoanMayOutliveItsPublisher) {
   EXPECT_NO_THROW((void)core.publisher<int>("late")) << "the last loan ended the old publisher";
 }
 
+TEST_F(ShmTest, ABatchIsWrittenInPlaceAndReadInOneStepInOrderWithItsStamps) {
+  const shm::TopicQos qos{.capacity = 16, .max_held = 16};
+  auto publisher = core.publisher<Pose>("batch", qos);
+  auto reader = core.subscribe<Pose>("batch", {}, qos).subscribe();
+  auto batch = publisher.loan_some(5);
+  ASSERT_TRUE(batch) << batch.error().describe();
+  ASSERT_EQ(batch->size(), 5u);
+  std::vector<const Pose*> written;
+  std::vector<Clock::time_point> stamps;
+  const auto t0 = Clock::now() - 1s;
+  for (std::size_t i = 0; i < batch->size(); ++i) {
+    (*batch)[i] = Pose{static_cast<double>(i), 0, 0, i};
+    written.push_back(&(*batch)[i]);
+    stamps.push_back(t0 + std::chrono::milliseconds{i});
+  }
+  EXPECT_FALSE(reader.try_read()) << "nothing is visible before the batch is published";
+  std::move(*batch).publish(stamps);
+  std::vector<Sample<shm::View<Pose>>> got;
+  ASSERT_EQ(reader.read_some(got, 100, Clock::now() + 1s), 5u);
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    EXPECT_EQ(got[i].value.get(), written[i]) << "read where it was written";
+    EXPECT_EQ(got[i].value->stamp_ns, i);
+    EXPECT_EQ(got[i].stamp, stamps[i]);
+  }
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
+TEST_F(ShmTest, ABatchIsAsLargeAsTheRingHasRoomForUnderBlock) {
+  const shm::TopicQos qos{.capacity = 8, .overflow = Overflow::block, .block_timeout = 50ms, .max_held = 8};
+  auto publisher = core.publisher<int>("room", qos);
+  auto reader = core.subscribe<int>("room", {}, qos).subscribe();
+  auto first = publisher.loan_some(100);
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->size(), 8u) << "never more than the ring's capacity";
+  for (std::size_t i = 0; i < first->size(); ++i) (*first)[i] = static_cast<int>(i);
+  std::move(*first).publish();
+  std::vector<Sample<shm::View<int>>> got;
+  ASSERT_EQ(reader.read_some(got, 3, Clock::now() + 1s), 3u);
+  got.clear();
+  auto second = publisher.loan_some(100);
+  ASSERT_TRUE(second);
+  EXPECT_EQ(second->size(), 3u) << "the subscriber has taken 3: room for 3 more";
+  for (std::size_t i = 0; i < second->size(); ++i) (*second)[i] = static_cast<int>(8 + i);
+  std::move(*second).publish();
+  for (int expected = 3; expected < 11; ++expected) {
+    auto v = reader.try_read();
+    ASSERT_TRUE(v);
+    EXPECT_EQ(*v->value, expected);
+  }
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
+TEST_F(ShmTest, ABatchDroppedUnpublishedGivesItsSlotsBack) {
+  const shm::TopicQos qos{.capacity = 8, .max_held = 2};
+  auto publisher = core.publisher<int>("dropped", qos);
+  auto reader = core.subscribe<int>("dropped", {}, qos).subscribe();
+  for (int round = 0; round < 100; ++round) {
+    auto batch = publisher.loan_some(8);
+    ASSERT_TRUE(batch) << "round " << round << ": " << batch.error().describe();
+    EXPECT_EQ(batch->size(), 8u);
+  }
+  ASSERT_TRUE(publisher.publish(5));
+  auto v = reader.try_read();
+  ASSERT_TRUE(v);
+  EXPECT_EQ(*v->value, 5) << "nothing of the dropped batches was published";
+  EXPECT_FALSE(reader.try_read());
+}
+
+TEST_F(ShmTest, ABatchNeedsOneStampPerSlotAndMayOutliveItsPublisher) {
+  auto reader = core.subscribe<int>("late-batch").subscribe();
+  std::optional<shm::Batch<int>> batch;
+  {
+    auto publisher = core.publisher<int>("late-batch");
+    EXPECT_FALSE(publisher.loan_some(0)) << "a batch of nothing is refused";
+    auto slots = publisher.loan_some(3);
+    ASSERT_TRUE(slots);
+    batch.emplace(std::move(*slots));
+  }
+  for (std::size_t i = 0; i < batch->size(); ++i) (*batch)[i] = 40 + static_cast<int>(i);
+  const std::vector<Clock::time_point> two(2, Clock::now());
+  EXPECT_TRUE(fails_with([&] { std::move(*batch).publish(two); }, Errc::limit_exceeded, "3 slots published with 2 stamps"));
+  std::move(*batch).publish();
+  batch.reset();
+  for (int expected = 40; expected < 43; ++expected) {
+    auto v = reader.try_read();
+    ASSERT_TRUE(v);
+    EXPECT_EQ(*v->value, expected);
+  }
+  EXPECT_NO_THROW((void)core.publisher<int>("late-batch")) << "the batch ended the old publisher";
+}
+
 TEST_F(ShmTest, AViewCarriesTheStampThePublisherGaveIt) {
   auto publisher = core.publisher<int>("stamped");
   auto reader = core.subscribe<int>("stamped").subscribe();

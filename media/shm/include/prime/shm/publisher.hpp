@@ -10,6 +10,7 @@
 #include <string>
 #include <type_traits>
 #include <utility>
+#include <vector>
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
@@ -31,6 +32,13 @@ struct LoaningWriter {
   Writer writer;
   std::size_t loans = 0;
   std::shared_ptr<LoaningWriter> orphaned;  // set while loans outlive the publisher
+
+  // A loan (or a batch) ends: the last to end after the publisher is gone
+  // takes the writer with it.
+  static void end_loan(LoaningWriter* owner) noexcept {
+    if (--owner->loans > 0) return;
+    auto last = std::move(owner->orphaned);
+  }
 };
 
 }  // namespace detail
@@ -84,15 +92,78 @@ class Loan {
     owner_->writer.discard(chunk_);
     end();
   }
-  void end() noexcept {
-    auto* owner = std::exchange(owner_, nullptr);
-    if (--owner->loans > 0) return;
-    auto last = std::move(owner->orphaned);  // set once the publisher is gone: its writer ends with this loan
-  }
+  void end() noexcept { detail::LoaningWriter::end_loan(std::exchange(owner_, nullptr)); }
 
   detail::LoaningWriter* owner_;
   std::uint32_t chunk_;
   std::size_t size_;
+};
+
+// Several slots of the topic, loaned at once (Publisher::loan_some): each
+// written in place, then all published in one step, in order, so that a
+// subscriber takes them with one transfer of the ring's line rather than
+// one per sample. Dropped unpublished, they are handed back. Move-only; it
+// may outlive its Publisher, like a Loan.
+template <Message T>
+class Batch {
+ public:
+  Batch(Batch&& other) noexcept
+      : owner_{std::exchange(other.owner_, nullptr)}, chunks_{std::move(other.chunks_)}, size_{other.size_} {}
+  Batch& operator=(Batch&& other) noexcept {
+    if (this != &other) {
+      discard();
+      owner_ = std::exchange(other.owner_, nullptr);
+      chunks_ = std::move(other.chunks_);
+      size_ = other.size_;
+    }
+    return *this;
+  }
+  ~Batch() { discard(); }
+
+  // How many slots were loaned: at least one, at most what was asked.
+  [[nodiscard]] std::size_t size() const noexcept { return chunks_.size(); }
+  [[nodiscard]] T& operator[](std::size_t i) const noexcept requires(!std::is_same_v<T, Bytes>) {
+    return *std::launder(reinterpret_cast<T*>(owner_->writer.topic()->payload(chunks_[i])));
+  }
+  // Slot `i`'s bytes, on a raw byte topic.
+  [[nodiscard]] std::span<std::byte> bytes(std::size_t i) const noexcept requires std::is_same_v<T, Bytes> {
+    return {owner_->writer.topic()->payload(chunks_[i]), size_};
+  }
+
+  // Publishes every slot, stamped `stamp`.
+  void publish(Clock::time_point stamp = Clock::now()) && {
+    const std::vector<Clock::time_point> stamps(chunks_.size(), stamp);
+    std::move(*this).publish(stamps);
+  }
+  // Publishes every slot, slot i stamped stamps[i] (as many stamps as slots).
+  void publish(std::span<const Clock::time_point> stamps) && {
+    if (stamps.size() != chunks_.size())
+      throw Failure{{Errc::limit_exceeded, "topic '" + owner_->writer.topic()->name() + "': a batch of " +
+                                                 std::to_string(chunks_.size()) + " slots published with " +
+                                                 std::to_string(stamps.size()) + " stamps"}};
+    const std::vector<std::size_t> sizes(chunks_.size(), size_);
+    owner_->writer.publish_some(chunks_, sizes, stamps);
+    chunks_.clear();
+    detail::LoaningWriter::end_loan(std::exchange(owner_, nullptr));
+  }
+
+ private:
+  template <Message>
+  friend class Publisher;
+  Batch(detail::LoaningWriter* owner, std::vector<std::uint32_t> chunks, std::size_t size)
+      : owner_{owner}, chunks_{std::move(chunks)}, size_{size} {
+    ++owner_->loans;
+  }
+
+  void discard() noexcept {
+    if (!owner_) return;
+    for (const auto chunk : chunks_) owner_->writer.discard(chunk);
+    detail::LoaningWriter::end_loan(std::exchange(owner_, nullptr));
+  }
+
+  detail::LoaningWriter* owner_;
+  std::vector<std::uint32_t> chunks_;
+  std::size_t size_;  // bytes in each slot
 };
 
 // The one publisher of a topic in its domain. Publishing is loan → write in
@@ -129,14 +200,31 @@ class Publisher {
   // A slot of `size` bytes on a raw byte topic; a size over the topic's
   // maximum is Errc::limit_exceeded, naming both.
   [[nodiscard]] std::expected<Loan<T>, Error> loan(std::size_t size) requires std::is_same_v<T, Bytes> {
-    const auto max = owner_->writer.topic()->header().max_message_size;
-    if (size > max)
-      return std::unexpected(Error{Errc::limit_exceeded, "topic '" + name() + "': a message of " +
-                                                             std::to_string(size) + " bytes exceeds its maximum of " +
-                                                             std::to_string(max) + " bytes"});
+    if (auto fits = check_size(size); !fits) return std::unexpected(std::move(fits.error()));
     auto chunk = owner_->writer.loan();
     if (!chunk) return std::unexpected(std::move(chunk.error()));
     return Loan<T>{owner_.get(), *chunk, size};
+  }
+
+  // Up to `max` slots at once, default-initialised: the first as loan()
+  // gives it (waiting under `block`), then as many more as the topic has
+  // free now (and, under `block`, room for in the ring), never more than its
+  // capacity. For streams of small messages: a batch costs the subscriber
+  // about one transfer of the ring's cache line, not one per sample.
+  [[nodiscard]] std::expected<Batch<T>, Error> loan_some(std::size_t max) requires(!std::is_same_v<T, Bytes>) {
+    auto chunks = loan_chunks(max);
+    if (!chunks) return std::unexpected(std::move(chunks.error()));
+    for (const auto chunk : *chunks) ::new (owner_->writer.topic()->payload(chunk)) T;
+    return Batch<T>{owner_.get(), std::move(*chunks), sizeof(T)};
+  }
+  // The same on a raw byte topic, each slot `size` bytes.
+  [[nodiscard]] std::expected<Batch<T>, Error> loan_some(std::size_t max, std::size_t size)
+    requires std::is_same_v<T, Bytes>
+  {
+    if (auto fits = check_size(size); !fits) return std::unexpected(std::move(fits.error()));
+    auto chunks = loan_chunks(max);
+    if (!chunks) return std::unexpected(std::move(chunks.error()));
+    return Batch<T>{owner_.get(), std::move(*chunks), size};
   }
 
   // Copies `value` into a loaned slot and publishes it: for small messages
@@ -163,6 +251,21 @@ class Publisher {
   [[nodiscard]] const std::string& name() const noexcept { return owner_->writer.topic()->name(); }
 
  private:
+  std::expected<void, Error> check_size(std::size_t size) const {
+    const auto max = owner_->writer.topic()->header().max_message_size;
+    if (size <= max) return {};
+    return std::unexpected(Error{Errc::limit_exceeded, "topic '" + name() + "': a message of " + std::to_string(size) +
+                                                           " bytes exceeds its maximum of " + std::to_string(max) + " bytes"});
+  }
+  std::expected<std::vector<std::uint32_t>, Error> loan_chunks(std::size_t max) {
+    if (max == 0)
+      return std::unexpected(Error{Errc::limit_exceeded, "topic '" + name() + "': a batch of 0 slots asked for"});
+    std::vector<std::uint32_t> chunks;
+    chunks.reserve(max);
+    if (auto done = owner_->writer.loan_some(max, chunks); !done) return std::unexpected(std::move(done.error()));
+    return chunks;
+  }
+
   void release() noexcept {
     if (owner_ && owner_->loans > 0) owner_->orphaned = owner_;  // the last loan ends the writer
     owner_.reset();

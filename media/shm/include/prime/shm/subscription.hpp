@@ -67,14 +67,15 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     while (true) {
       if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
       // Each view holds its slot: a batch is at most what the budget has left.
+      // Taken in one step (one store of the cursor), then made views.
       const auto room = subscriber_->max_held() - std::min(subscriber_->held(), subscriber_->max_held());
-      std::size_t n = 0;
-      for (; n < std::min(max, room); ++n) {
-        auto taken = subscriber_->cursor().try_take();
-        if (!taken) break;
-        out.push_back(sample(*taken));
+      taken_.clear();
+      const auto n = subscriber_->cursor().take_some(std::min(max, room), taken_);
+      for (const auto& t : taken_) out.push_back(sample(t));
+      if (n > 0) {
+        budget_reported_ = false;
+        return n;
       }
-      if (n > 0) return n;
     }
   }
 
@@ -148,6 +149,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   std::weak_ptr<prime::detail::RuntimeState> runtime_;
   std::shared_ptr<const void> feed_;
   bool budget_reported_ = false;
+  std::vector<detail::Taken> taken_;  // read_some's scratch
 };
 
 // A topic seen as a source of the topology: `subscription | chain`,

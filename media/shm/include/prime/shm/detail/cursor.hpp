@@ -7,6 +7,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "prime/logic/error.hpp"
 #include "prime/shm/detail/layout.hpp"
@@ -98,6 +99,36 @@ class Cursor {
       const auto head = h.head.load(std::memory_order_acquire);
       skip_to(std::max(next_ + 1, head > h.capacity ? head - h.capacity : 0));
     }
+  }
+
+  // Up to `max` samples, appended to `out`, with one store of the cursor for
+  // them all; how many. A sample overwritten before it was taken ends the
+  // batch, and the next take skips what was lost.
+  std::size_t take_some(std::size_t max, std::vector<Taken>& out) {
+    auto seq = next_;
+    for (; seq - next_ < max; ++seq) {
+      const auto entry = topic_->ring(seq).load(std::memory_order_acquire);
+      if (RingEntry::ahead(entry, seq) != 0) break;
+      const auto index = RingEntry::chunk(entry);
+      auto& chunk = topic_->chunk(index);
+      __builtin_prefetch(topic_->payload(index));
+      chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
+      if (chunk.seq.load(std::memory_order_seq_cst) != seq) {
+        chunk.holders.fetch_and(~bit_);
+        break;
+      }
+      out.push_back({index, seq});
+    }
+    if (seq != next_) {
+      const auto n = seq - next_;
+      advance(seq);
+      return n;
+    }
+    if (max == 0) return 0;
+    auto taken = try_take();  // nothing in order: the single take skips a loss or notes it has caught up
+    if (!taken) return 0;
+    out.push_back(*taken);
+    return 1;
   }
 
   // Moves on to the newest sample published, passing over the older unread

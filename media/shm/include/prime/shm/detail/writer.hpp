@@ -8,6 +8,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <stop_token>
 #include <string>
 #include <utility>
@@ -73,8 +74,69 @@ class Writer {
                                                            std::to_string(h.max_held) + ")"});
   }
 
+  // Up to `max` chunks at once, appended to `out`: the first as loan()
+  // gives it (waiting under block), then as many more as are free and, under
+  // block, as the ring has room for without waiting. Never more than the
+  // ring's capacity. The extra chunks are ones no subscriber holds, so
+  // taking them costs no subscriber its max_held.
+  std::expected<void, Error> loan_some(std::size_t max, std::vector<std::uint32_t>& out) {
+    auto first = loan();
+    if (!first) return std::unexpected(std::move(first.error()));
+    out.push_back(*first);
+    auto& h = topic_->header();
+    const bool block = static_cast<Overflow>(h.overflow) == Overflow::block;
+    auto room = [&]() -> std::uint64_t {  // sequences publishable now: next_ + k - capacity <= min_cursor_
+      if (!block) return h.capacity;
+      return min_cursor_ + h.capacity > next_ ? std::min(h.capacity, min_cursor_ + h.capacity - next_) : 0;
+    };
+    auto can = std::min<std::uint64_t>(max, room());
+    if (can < max && block) {
+      min_cursor_ = std::min(slowest(), next_);  // a fresh look may find more room
+      can = std::min<std::uint64_t>(max, room());
+    }
+    for (std::uint64_t k = 1; k < can; ++k) {
+      const auto chunk = claim();
+      if (!chunk) break;
+      out.push_back(*chunk);
+    }
+    return {};
+  }
+
   // Hands a loaned chunk back unpublished.
   void discard(std::uint32_t chunk) noexcept { topic_->chunk(chunk).holders.fetch_and(~kLoanBit); }
+
+  // Publishes loaned chunks as the next sequences, in order, each with its
+  // size and stamp. Never waits. Every header first, then the ring entries
+  // one after another, then the head and one wake: a subscriber polling the
+  // ring fetches its line once for several samples, not once for each.
+  void publish_some(std::span<const std::uint32_t> chunks, std::span<const std::size_t> sizes,
+                    std::span<const Clock::time_point> stamps) noexcept {
+    auto& h = topic_->header();
+    const auto first = next_;
+    for (std::size_t i = 0; i < chunks.size(); ++i) {
+      auto& c = topic_->chunk(chunks[i]);
+      c.size = sizes[i];
+      c.stamp = stamps[i].time_since_epoch().count();
+      c.seq.store(first + i, std::memory_order_release);
+      c.holders.fetch_xor(kRingBit | kLoanBit);
+    }
+    evicted_.clear();
+    for (std::size_t i = 0; i < chunks.size(); ++i) {
+      auto& entry = topic_->ring(first + i);
+      const auto old = RingEntry::chunk(entry.load(std::memory_order_relaxed));
+      entry.store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
+      if (old != kNoChunk) evicted_.push_back(old);
+    }
+    next_ = first + chunks.size();
+    h.head.store(next_, std::memory_order_seq_cst);
+    for (const auto old : evicted_) {
+      auto& dropped = topic_->chunk(old);
+      dropped.seq.store(kNotPublished, std::memory_order_relaxed);
+      dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
+    }
+    wake_subscribers();
+    claim_ahead();
+  }
 
   // Publishes the loaned `chunk` as the next sequence. Never waits.
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
@@ -97,8 +159,15 @@ class Writer {
       dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
     }
     wake_subscribers();
-    // Claim the next loan's chunk now, while subscribers read this one, and
-    // fetch its lines for writing: the next loan then waits on no one.
+    claim_ahead();
+  }
+
+ private:
+  // Claims the next loan's chunk now, while subscribers read what was just
+  // published, and fetches its lines for writing: the next loan then waits
+  // on no one.
+  void claim_ahead() noexcept {
+    if (ready_ != kNoChunk) return;
     if (auto next = claim()) {
       ready_ = *next;
       __builtin_prefetch(&topic_->chunk(ready_), 1);
@@ -106,7 +175,6 @@ class Writer {
     }
   }
 
- private:
   // A free chunk, now held by this publisher, if there is one.
   std::optional<std::uint32_t> claim() noexcept {
     const auto count = topic_->header().chunk_count;
@@ -229,6 +297,7 @@ class Writer {
   std::uint32_t ready_ = kNoChunk;  // claimed ahead for the next loan
   std::uint64_t min_cursor_ = 0;    // the slowest subscriber's cursor when last looked at
   int idle_rings_ = 0;              // rings in a row that found a sleeper's bit but woke no one
+  std::vector<std::uint32_t> evicted_;  // publish_some's scratch: chunks its sequences pushed out of the ring
 };
 
 }  // namespace prime::shm::detail
