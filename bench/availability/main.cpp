@@ -71,19 +71,6 @@
 //
 //   prime_availability [--ipc_no_pin] [--benchmark_*...]
 
-#include <benchmark/benchmark.h>
-
 #include "harness.hpp"
 
-int main(int argc, char** argv) {
-  namespace ipc = prime::bench::ipc;
-  if (ipc::is_child_command(argc, argv)) return ipc::child_main(argc, argv);
-
-  ipc::configure_parent(argc, argv);
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  benchmark::RunSpecifiedBenchmarks();
-  benchmark::Shutdown();
-  ipc::bound_exit(std::chrono::seconds{10});
-  return 0;
-}
+int main(int argc, char** argv) { return prime::bench::ipc::benchmark_main(argc, argv); }

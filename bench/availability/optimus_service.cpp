@@ -161,16 +161,12 @@ class Setup {
     av::clear(ledger_);
     (void)server_.serve("shout", [this](std::string request) { return av::serve_request(ledger_, request); });
     client_.emplace(optimus::Options{.url = url_, .domain = domain_});
-    for (std::size_t c = 0; c < extra_clients; ++c)
-      extras_.push_back(std::make_unique<ipc::Link>("Availability.optimus_extra", chars, std::vector<int>{},
-                                                    std::vector<std::string>{url_, domain_}));
-    for (auto& e : extras_) e->wait_ready();
-    for (auto& e : extras_) e->go();
+    extras_.emplace("Availability.optimus_extra", extra_clients, chars, std::vector<std::string>{url_, domain_});
   }
   Setup(const Setup&) = delete;
   Setup& operator=(const Setup&) = delete;
   ~Setup() {
-    while (!extras_.empty()) extras_.pop_back();
+    extras_.reset();
     client_.reset();
     server_.stop();
   }
@@ -178,12 +174,8 @@ class Setup {
   Shout service() { return client_->service<std::string, std::uint64_t>("shout", {.timeout = av::kCallTimeout}); }
   av::Ledger& ledger() { return ledger_; }
 
-  void check() {
-    for (auto& e : extras_) e->check();
-  }
-  void stop() {
-    for (auto& e : extras_) e->stop();
-  }
+  void check() { extras_->check(); }
+  void stop() { extras_->stop(); }
 
  private:
   std::string url_;
@@ -191,7 +183,7 @@ class Setup {
   av::Ledger ledger_;
   optimus::Core server_;
   std::optional<optimus::Core> client_;
-  std::vector<std::unique_ptr<ipc::Link>> extras_;
+  std::optional<av::ExtraClients> extras_;
 };
 
 template <class Body>

@@ -96,16 +96,12 @@ class Setup {
     server_.emplace("Availability.shm_serve", chars, std::vector<int>{mapping_.fd()}, std::vector<std::string>{domain_});
     server_->wait_ready();
     server_->go();
-    for (std::size_t c = 0; c < extra_clients; ++c)
-      extras_.push_back(std::make_unique<ipc::Link>("Availability.shm_extra", chars, std::vector<int>{},
-                                                    std::vector<std::string>{domain_}));
-    for (auto& e : extras_) e->wait_ready();
-    for (auto& e : extras_) e->go();
+    extras_.emplace("Availability.shm_extra", extra_clients, chars, std::vector<std::string>{domain_});
   }
   Setup(const Setup&) = delete;
   Setup& operator=(const Setup&) = delete;
   ~Setup() {
-    while (!extras_.empty()) extras_.pop_back();
+    extras_.reset();
     server_.reset();
   }
 
@@ -115,12 +111,12 @@ class Setup {
   // Throws PeerError if any process has died or failed.
   void check() {
     server_->check();
-    for (auto& e : extras_) e->check();
+    extras_->check();
   }
 
   // Stops every process, reporting a failure of any.
   void stop() {
-    for (auto& e : extras_) e->stop();
+    extras_->stop();
     server_->stop();
   }
 
@@ -130,7 +126,7 @@ class Setup {
   ipc::SharedMapping mapping_;
   av::Ledger& ledger_;
   std::optional<ipc::Link> server_;
-  std::vector<std::unique_ptr<ipc::Link>> extras_;
+  std::optional<av::ExtraClients> extras_;
 };
 
 void BM_Availability_Shm(benchmark::State& state) {

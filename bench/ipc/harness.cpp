@@ -197,7 +197,7 @@ void Child::ready() {
   check();
 }
 
-bool is_child_command(int argc, char** argv) { return argc >= 2 && argv[1] == kChildFlag; }
+static bool is_child_command(int argc, char** argv) { return argc >= 2 && argv[1] == kChildFlag; }
 
 int child_main(int argc, char** argv) {
   if (argc < 5) {
@@ -240,7 +240,7 @@ int child_main(int argc, char** argv) {
   }
 }
 
-void configure_parent(int& argc, char** argv) {
+static void configure_parent(int& argc, char** argv) {
   bool pin = true;
   int kept = 1;
   for (int i = 1; i < argc; ++i) {
@@ -260,7 +260,7 @@ void configure_parent(int& argc, char** argv) {
                                                         : std::string{"off"});
 }
 
-void bound_exit(std::chrono::seconds timeout) {
+static void bound_exit(std::chrono::seconds timeout) {
   std::thread{[timeout] {
     std::this_thread::sleep_for(timeout);
     const char message[] =
@@ -269,6 +269,17 @@ void bound_exit(std::chrono::seconds timeout) {
     [[maybe_unused]] const auto written = ::write(STDERR_FILENO, message, sizeof message - 1);
     ::_exit(3);
   }}.detach();
+}
+
+int benchmark_main(int argc, char** argv) {
+  if (is_child_command(argc, argv)) return child_main(argc, argv);
+  configure_parent(argc, argv);
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  bound_exit(std::chrono::seconds{10});
+  return 0;
 }
 
 cpu_set_t startup_cpus() { return pinning().startup; }

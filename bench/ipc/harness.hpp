@@ -2,8 +2,8 @@
 
 // The harness of prime_ipc: every benchmark runs between two real processes.
 // This process (the parent) times; the other (the child) is this same binary
-// re-executed as `prime_ipc --ipc-child <entry> ...`, which main() hands to
-// child_main() before Google Benchmark or any library sees it. So a child
+// re-executed as `prime_ipc --ipc-child <entry> ...`, which benchmark_main()
+// hands to child_main() before Google Benchmark or any library sees it. So a child
 // never inherits library state (iceoryx's runtime, say) from the parent, and
 // the parent may start as many children as it likes: one per benchmark run.
 // While it lives, the parent's thread runs on one CPU and the child on another
@@ -217,15 +217,13 @@ class ChildEntry {
   ChildEntry(std::string_view name, void (*main)(Child&));
 };
 
-// main() calls these first: the child's whole life, and the parent's own
-// options (--ipc_no_pin), which they remove from argv.
-[[nodiscard]] bool is_child_command(int argc, char** argv);
-int child_main(int argc, char** argv);
-void configure_parent(int& argc, char** argv);
-// And this last: if this process has not ended `timeout` after main returns
-// (a library's static destructor waiting on a helper process that hangs),
-// it says so and ends anyway, with status 3.
-void bound_exit(std::chrono::seconds timeout);
+// The whole main() of a benchmark binary that uses this harness: a child
+// command runs its child's whole life; otherwise the parent's own options
+// (--ipc_no_pin) are taken from argv and Google Benchmark runs the rest. If
+// the process has not ended 10 s after that (a library's static destructor
+// waiting on a helper process that hangs), it says so and ends anyway, with
+// status 3.
+int benchmark_main(int argc, char** argv);
 
 // The CPU affinity this process started with (for helpers like RouDi).
 [[nodiscard]] cpu_set_t startup_cpus();
