@@ -21,8 +21,8 @@
 #include <benchmark/benchmark.h>
 
 #include <atomic>
-#include <expected>
 #include <cstdio>
+#include <expected>
 #include <memory>
 #include <string>
 #include <thread>

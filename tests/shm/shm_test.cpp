@@ -403,6 +403,29 @@ TEST_F(ShmTest, ABatchNeedsOneStampPerSlotAndMayOutliveItsPublisher) {
   EXPECT_NO_THROW((void)core.publisher<int>("late-batch")) << "the batch ended the old publisher";
 }
 
+TEST_F(ShmTest, ASubscriberPassedOverIsWaitedForAgainOnceABatchReadCatchesUp) {
+  const shm::TopicQos qos{.capacity = 8, .overflow = Overflow::block, .block_timeout = 50ms, .max_held = 8};
+  auto publisher = core.publisher<int>("laggard", qos);
+  auto reader = core.subscribe<int>("laggard", {}, qos).subscribe();
+  auto errors = core.errors().subscribe();
+  int n = 0;
+  while (n < 9) ASSERT_TRUE(publisher.publish(n++));  // the 9th waits 50 ms, then passes the reader over
+  ASSERT_TRUE(errors.try_read()) << "passed over once";
+  std::vector<Sample<shm::View<int>>> got;
+  std::size_t last = 0;
+  while (got.empty() || *got.back().value != 8) {  // the first read skips what was lost, the next takes the rest
+    auto read = reader.read_some(got, 8, Clock::now() + 1s);
+    ASSERT_TRUE(read) << read.error().describe();
+    last = *read;
+  }
+  EXPECT_GT(last, 1u) << "it caught up in a batch, not one sample at a time";
+  got.clear();
+  while (n < 18) ASSERT_TRUE(publisher.publish(n++));  // the 9th after the catch-up waits for it again
+  auto again = errors.try_read();
+  ASSERT_TRUE(again) << "caught up by a batch read, the reader is waited for (and passed over) again";
+  EXPECT_NE(again->value.message.find("read nothing for 50 ms"), std::string::npos) << again->value.message;
+}
+
 TEST_F(ShmTest, AViewCarriesTheStampThePublisherGaveIt) {
   auto publisher = core.publisher<int>("stamped");
   auto reader = core.subscribe<int>("stamped").subscribe();

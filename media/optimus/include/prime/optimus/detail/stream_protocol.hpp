@@ -3,8 +3,8 @@
 #include <hiredis/hiredis.h>
 
 #include <charconv>
-#include <cstddef>
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>

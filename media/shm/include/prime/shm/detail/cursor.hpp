@@ -105,6 +105,7 @@ class Cursor {
   // them all; how many. A sample overwritten before it was taken ends the
   // batch, and the next take skips what was lost.
   std::size_t take_some(std::size_t max, std::vector<Taken>& out) {
+    if (max == 0) return 0;
     auto seq = next_;
     for (; seq - next_ < max; ++seq) {
       const auto entry = topic_->ring(seq).load(std::memory_order_acquire);
@@ -120,11 +121,12 @@ class Cursor {
       out.push_back({index, seq});
     }
     if (seq != next_) {
+      // Read everything published: a subscriber passed over is waited for again.
+      if (RingEntry::ahead(topic_->ring(seq).load(std::memory_order_acquire), seq) < 0) caught_up();
       const auto n = seq - next_;
       advance(seq);
       return n;
     }
-    if (max == 0) return 0;
     auto taken = try_take();  // nothing in order: the single take skips a loss or notes it has caught up
     if (!taken) return 0;
     out.push_back(*taken);
