@@ -53,7 +53,7 @@ prime::SyncPolicy policy_of(Policy p) {
   return prime::exact_time;
 }
 
-template <std::size_t N, std::size_t... I>
+template <std::size_t... I>
 void offer(auto& matcher, std::size_t input, Clock::time_point stamp, std::index_sequence<I...>) {
   ((input == I ? matcher.template offer<I>({static_cast<int>(I), stamp}, {}) : void()), ...);
 }
@@ -70,7 +70,7 @@ struct Harness {
     depths.fill(64);
     matcher = std::make_unique<prime::detail::Synchronizer<Ts...>>(policy_of(p), depths, out);
   }
-  void add(std::size_t input, Clock::time_point stamp) { offer<kN>(*matcher, input, stamp, std::index_sequence_for<Ts...>{}); }
+  void add(std::size_t input, Clock::time_point stamp) { offer(*matcher, input, stamp, std::index_sequence_for<Ts...>{}); }
 };
 
 template <class H>

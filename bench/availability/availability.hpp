@@ -17,7 +17,6 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
-#include <memory>
 #include <numeric>
 #include <optional>
 #include <random>
@@ -61,34 +60,13 @@ inline constexpr auto kExtraMinGap = 1ms;
 inline constexpr auto kExtraMaxGap = 20ms;
 
 // The extra clients of one configuration: `count` processes of the child
-// entry `entry`, started, ready and let go together; checked and stopped
-// together; ended newest first.
-class ExtraClients {
- public:
-  ExtraClients(const std::string& entry, std::size_t count, std::size_t chars, const std::vector<std::string>& args) {
-    for (std::size_t c = 0; c < count; ++c)
-      links_.push_back(std::make_unique<ipc::Link>(entry, chars, std::vector<int>{}, args));
-    for (auto& e : links_) e->wait_ready();
-    for (auto& e : links_) e->go();
-  }
-  ExtraClients(const ExtraClients&) = delete;
-  ExtraClients& operator=(const ExtraClients&) = delete;
-  ~ExtraClients() {
-    while (!links_.empty()) links_.pop_back();
-  }
-
-  // Throws PeerError if any of them has died or failed.
-  void check() {
-    for (auto& e : links_) e->check();
-  }
-  // Stops them all, reporting a failure of any.
-  void stop() {
-    for (auto& e : links_) e->stop();
-  }
-
- private:
-  std::vector<std::unique_ptr<ipc::Link>> links_;
-};
+// entry `entry`, started, ready and let go together.
+inline void start_extra_clients(ipc::Links& links, const std::string& entry, std::size_t count, std::size_t chars,
+                                const std::vector<std::string>& args) {
+  for (std::size_t c = 0; c < count; ++c) links.start(entry, chars, {}, args);
+  links.wait_ready();
+  links.go();
+}
 
 // The requests of one availability configuration: min(kMaxRequests,
 // kSendingTime / period), lowered by PRIME_AVAILABILITY_REQUESTS=<n> (a

@@ -161,7 +161,8 @@ class Setup {
     av::clear(ledger_);
     (void)server_.serve("shout", [this](std::string request) { return av::serve_request(ledger_, request); });
     client_.emplace(optimus::Options{.url = url_, .domain = domain_});
-    extras_.emplace("Availability.optimus_extra", extra_clients, chars, std::vector<std::string>{url_, domain_});
+    av::start_extra_clients(extras_.emplace(), "Availability.optimus_extra", extra_clients, chars,
+                            std::vector<std::string>{url_, domain_});
   }
   Setup(const Setup&) = delete;
   Setup& operator=(const Setup&) = delete;
@@ -183,7 +184,7 @@ class Setup {
   av::Ledger ledger_;
   optimus::Core server_;
   std::optional<optimus::Core> client_;
-  std::optional<av::ExtraClients> extras_;
+  std::optional<ipc::Links> extras_;
 };
 
 template <class Body>

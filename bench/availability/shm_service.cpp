@@ -96,7 +96,8 @@ class Setup {
     server_.emplace("Availability.shm_serve", chars, std::vector<int>{mapping_.fd()}, std::vector<std::string>{domain_});
     server_->wait_ready();
     server_->go();
-    extras_.emplace("Availability.shm_extra", extra_clients, chars, std::vector<std::string>{domain_});
+    av::start_extra_clients(extras_.emplace(), "Availability.shm_extra", extra_clients, chars,
+                            std::vector<std::string>{domain_});
   }
   Setup(const Setup&) = delete;
   Setup& operator=(const Setup&) = delete;
@@ -126,7 +127,7 @@ class Setup {
   ipc::SharedMapping mapping_;
   av::Ledger& ledger_;
   std::optional<ipc::Link> server_;
-  std::optional<av::ExtraClients> extras_;
+  std::optional<ipc::Links> extras_;
 };
 
 void BM_Availability_Shm(benchmark::State& state) {

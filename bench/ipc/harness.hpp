@@ -74,6 +74,7 @@
 #include <cstdint>
 #include <exception>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -170,6 +171,41 @@ class Link {
   std::optional<cpu_set_t> unpinned_;
   std::function<void()> drain_;
   std::optional<ChildProcess> process_;
+};
+
+// The children of one benchmark run beyond one pair. Each Link pins this
+// process on start and restores the affinity it found when it ends, so they
+// end in the reverse order of their start: the first restores what was there
+// before any (a vector would end them first to last).
+class Links {
+ public:
+  Links() = default;
+  Links(const Links&) = delete;
+  Links& operator=(const Links&) = delete;
+  ~Links() {
+    while (!links_.empty()) links_.pop_back();
+  }
+
+  Link& start(std::string entry, std::size_t bytes, std::vector<int> fds = {}, std::vector<std::string> args = {}) {
+    links_.push_back(std::make_unique<Link>(std::move(entry), bytes, std::move(fds), std::move(args)));
+    return *links_.back();
+  }
+  void wait_ready() {
+    for (auto& l : links_) l->wait_ready();
+  }
+  void go() {
+    for (auto& l : links_) l->go();
+  }
+  void stop() {
+    for (auto it = links_.rbegin(); it != links_.rend(); ++it) (*it)->stop();
+  }
+  // A Side for spin_until and sleep_until: throws if any child has died or failed.
+  void check() {
+    for (auto& l : links_) l->check();
+  }
+
+ private:
+  std::vector<std::unique_ptr<Link>> links_;
 };
 
 // Runs one benchmark's parent side, `body(payload bytes)`, and turns whatever

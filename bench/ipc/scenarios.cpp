@@ -124,41 +124,6 @@ void sleep_and_take(S& side, Subscriber& reader, std::uint64_t seq, Clock::durat
   }
 }
 
-// The children of one benchmark run. Each Link pins this process on start
-// and restores the affinity it found when it ends, so they must end in the
-// reverse order of their start: the first restores what was there before
-// any (a vector would end them first to last).
-class Links {
- public:
-  Links() = default;
-  Links(const Links&) = delete;
-  Links& operator=(const Links&) = delete;
-  ~Links() {
-    while (!links_.empty()) links_.pop_back();
-  }
-
-  ipc::Link& start(std::string entry, std::vector<int> fds, std::vector<std::string> args) {
-    links_.push_back(std::make_unique<ipc::Link>(std::move(entry), kBytes, std::move(fds), std::move(args)));
-    return *links_.back();
-  }
-  void wait_ready() {
-    for (auto& l : links_) l->wait_ready();
-  }
-  void go() {
-    for (auto& l : links_) l->go();
-  }
-  void stop() {
-    for (auto it = links_.rbegin(); it != links_.rend(); ++it) (*it)->stop();
-  }
-  // A Side for spin_until: throws if any child has died or failed.
-  void check() {
-    for (auto& l : links_) l->check();
-  }
-
- private:
-  std::vector<std::unique_ptr<ipc::Link>> links_;
-};
-
 // ---- FanOut ----------------------------------------------------------------
 
 constexpr std::size_t kMaxFanOut = 4;
@@ -202,9 +167,9 @@ void BM_FanOut_Shm(benchmark::State& state) {
     auto fan = core.publisher<shm::Bytes>("fan", fan_out_qos());
     auto mapping = ipc::SharedMapping::create("prime-ipc-acks", sizeof(Acks));
     auto& acks = mapping.construct<Acks>();
-    Links children;
+    ipc::Links children;
     for (std::size_t i = 0; i < subscribers; ++i)
-      children.start("Scenario.fan_out_subscriber", {mapping.fd()}, {domain, std::to_string(i)});
+      children.start("Scenario.fan_out_subscriber", kBytes, {mapping.fd()}, {domain, std::to_string(i)});
     children.wait_ready();
     children.go();
 
@@ -305,11 +270,11 @@ void BM_Loaded_Shm(benchmark::State& state) {
     shm::Core core{domain};
     auto ping = core.publisher<shm::Bytes>("ping", latency_qos());
     auto pong = core.subscribe<shm::Bytes>("pong", {}, latency_qos()).subscribe();
-    Links children;
-    children.start("Scenario.echo", {}, {domain});
+    ipc::Links children;
+    children.start("Scenario.echo", kBytes, {}, {domain});
     // Started after the echo, whose Link has pinned this process: the burner
     // goes where the publisher now runs.
-    children.start("Scenario.burn", {}, {current_cpus()});
+    children.start("Scenario.burn", kBytes, {}, {current_cpus()});
     children.wait_ready();
     children.go();
     ipc::time_round_trips(state, [&](std::uint64_t seq) {
@@ -398,8 +363,8 @@ void BM_Sleeping_Shm(benchmark::State& state) {
     auto sensor = core.publisher<shm::Bytes>("sensor", sensor_qos());
     auto mapping = ipc::SharedMapping::create("prime-ipc-sensor", sizeof(SensorReport));
     auto& report = mapping.construct<SensorReport>();
-    Links children;
-    auto& child = children.start("Scenario.sensor_subscriber", {mapping.fd()}, {domain, std::to_string(messages)});
+    ipc::Links children;
+    auto& child = children.start("Scenario.sensor_subscriber", kBytes, {mapping.fd()}, {domain, std::to_string(messages)});
     children.wait_ready();
     children.go();
     auto received = [&](std::uint64_t seq) { return report.received.load(std::memory_order_acquire) >= seq; };

@@ -116,26 +116,22 @@ void BM_Calls_ShmService(benchmark::State& state) {
           return echo(request, reply);
         },
         echo_qos(kBytes, 50us));
-    std::vector<std::unique_ptr<ipc::Link>> links;
-    for (std::size_t c = 0; c < clients; ++c)
-      links.push_back(std::make_unique<ipc::Link>("ShmService.call_loop", kBytes, std::vector<int>{},
-                                                  std::vector<std::string>{domain}));
-    for (auto& l : links) l->wait_ready();
-    for (auto& l : links) l->go();
+    ipc::Links links;
+    for (std::size_t c = 0; c < clients; ++c) links.start("ShmService.call_loop", kBytes, {}, {domain});
+    links.wait_ready();
+    links.go();
     // This thread (and the service's worker, which it started) share one
     // CPU: it looks at the count every millisecond, asleep in between.
-    ipc::sleep_until(*links.front(), [&] { return answered.load() >= 1000; });  // warmed up
+    ipc::sleep_until(links, [&] { return answered.load() >= 1000; });  // warmed up
     const auto start = std::chrono::steady_clock::now();
     const auto first = answered.load();
     for (auto _ : state) {
       std::this_thread::sleep_for(1ms);
-      for (auto& l : links) l->check();
+      links.check();
     }
     const std::chrono::duration<double> elapsed = std::chrono::steady_clock::now() - start;
     state.counters["calls/s"] = static_cast<double>(answered.load() - first) / elapsed.count();
-    for (auto& l : links) l->stop();
-    // Each Link restores the pinning it found: the first one's must be undone last.
-    while (!links.empty()) links.pop_back();
+    links.stop();
   });
 }
 BENCHMARK(BM_Calls_ShmService)->Arg(1)->Arg(4)->UseRealTime();

@@ -4,7 +4,6 @@
 
 #include <chrono>
 #include <cstdint>
-#include <filesystem>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -20,13 +19,6 @@ namespace prime::test {
 namespace {
 
 using namespace std::chrono_literals;
-
-int segments_of(const std::string& domain) {
-  int n = 0;
-  for (const auto& entry : std::filesystem::directory_iterator{"/dev/shm"})
-    n += entry.path().filename().string().starts_with("prime." + domain + ".") ? 1 : 0;
-  return n;
-}
 
 TEST(ShmProcesses, ASampleFromAnotherProcessIsReadInPlaceInTheSharedSegment) {
   const auto domain = unique_domain("zero-copy");

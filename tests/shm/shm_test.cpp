@@ -9,7 +9,6 @@
 #include <chrono>
 #include <cstdint>
 #include <cstring>
-#include <filesystem>
 #include <fstream>
 #include <numeric>
 #include <string>
@@ -595,12 +594,6 @@ TEST(ShmPermissions, SegmentsAre0600ByDefaultAndConfigurable) {
 
 TEST(ShmDomain, TheLastParticipantToLeaveRemovesTheSegments) {
   const auto domain = unique_domain("leave");
-  auto count = [&] {
-    int n = 0;
-    for (const auto& entry : std::filesystem::directory_iterator{"/dev/shm"})
-      n += entry.path().filename().string().find("prime." + domain + ".") == 0 ? 1 : 0;
-    return n;
-  };
   {
     shm::Core first{domain};
     auto topic = first.subscribe<int>("a");
@@ -608,9 +601,9 @@ TEST(ShmDomain, TheLastParticipantToLeaveRemovesTheSegments) {
       shm::Core second{domain};
       auto other = second.subscribe<int>("b");
     }
-    EXPECT_EQ(count(), 3) << "registry and two topics stay while a participant remains";
+    EXPECT_EQ(segments_of(domain), 3) << "registry and two topics stay while a participant remains";
   }
-  EXPECT_EQ(count(), 0);
+  EXPECT_EQ(segments_of(domain), 0);
 }
 
 TEST(ShmDomain, NamesAreEscapedSoDomainsAndTopicsNeverCollide) {

@@ -4,7 +4,6 @@
 
 #include <chrono>
 #include <cstdint>
-#include <filesystem>
 #include <string>
 #include <thread>
 #include <vector>
@@ -50,13 +49,6 @@ tool::Json last_json(const std::string& text) {
 
 double number(const tool::Json& j, const std::string& key) { return std::get<double>(j.object().at(key).value); }
 std::string text(const tool::Json& j, const std::string& key) { return std::get<std::string>(j.object().at(key).value); }
-
-int segments_of(const std::string& domain) {
-  int n = 0;
-  for (const auto& e : std::filesystem::directory_iterator{"/dev/shm"})
-    n += e.path().filename().string().starts_with("prime." + domain + ".") ? 1 : 0;
-  return n;
-}
 
 TEST(PrimeTool, LsAndInfoShowATopicAndAServiceOfRunningPeersWithTypesAndPids) {
   const auto domain = unique_domain("tool-ls");

@@ -3,7 +3,6 @@
 #include <hiredis/hiredis.h>
 
 #include <chrono>
-#include <csignal>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -151,7 +150,6 @@ int optimus_watch(const Options& o, const std::string& command) {
   if (!e.sources.contains(o.name))
     throw Failure{{Errc::not_found, "no source '" + o.name + "' in Optimus domain '" + o.domain + "'"}};
   const auto stream = o.domain + ":src:" + o.name;
-  std::signal(SIGINT, [](int) { std::_Exit(kOk); });
   std::string last = "$";
   Window values{o.window};
   std::optional<Clock::time_point> previous;

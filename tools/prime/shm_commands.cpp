@@ -1,6 +1,7 @@
 // `prime` on shared-memory domains.
 #include "shm_commands.hpp"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -34,17 +35,14 @@ void finish_on_ctrl_c() {
 // "prime::test::Pose (32 bytes, align 8, layout 1)" -> "prime::test::Pose"
 std::string short_type(const std::string& described) { return described.substr(0, described.find(" (")); }
 
-std::string pids(const std::vector<std::uint32_t>& list) {
+// "1,2,3": the pids of a list.
+std::string joined(const std::vector<std::uint32_t>& list) {
   std::string out;
   for (auto p : list) out += (out.empty() ? "" : ",") + std::to_string(p);
-  return out.empty() ? "-" : out;
+  return out;
 }
-
-std::string json_pids(const std::vector<std::uint32_t>& list) {
-  std::string out = "[";
-  for (std::size_t i = 0; i < list.size(); ++i) out += (i ? "," : "") + std::to_string(list[i]);
-  return out + "]";
-}
+std::string pids(const std::vector<std::uint32_t>& list) { return list.empty() ? "-" : joined(list); }
+std::string json_pids(const std::vector<std::uint32_t>& list) { return "[" + joined(list) + "]"; }
 
 std::string fixed(double v, int digits = 3) {
   std::ostringstream out;
@@ -58,15 +56,17 @@ shm::RegistrySnapshot snapshot_of(const std::string& domain) {
   return *seen;
 }
 
+// The topic or service of that name in a snapshot's list, or null.
+template <class Endpoint>
+const Endpoint* find_named(const std::vector<Endpoint>& list, const std::string& name) {
+  const auto found = std::ranges::find(list, name, &Endpoint::name);
+  return found == list.end() ? nullptr : &*found;
+}
 const shm::RegistrySnapshot::Topic* find_topic(const shm::RegistrySnapshot& s, const std::string& name) {
-  for (const auto& t : s.topics)
-    if (t.name == name) return &t;
-  return nullptr;
+  return find_named(s.topics, name);
 }
 const shm::RegistrySnapshot::Service* find_service(const shm::RegistrySnapshot& s, const std::string& name) {
-  for (const auto& v : s.services)
-    if (v.name == name) return &v;
-  return nullptr;
+  return find_named(s.services, name);
 }
 
 std::string overflow_name(Overflow o) { return o == Overflow::block ? "block" : "drop_oldest"; }
@@ -135,8 +135,6 @@ int watch_loop(const Options& o, Watch& w, OnSample on_sample, Report report) {
 }
 
 }  // namespace
-
-bool interrupted() { return stop_requested; }
 
 int shm_domains(const Options& o) {
   const auto found = shm::domains();

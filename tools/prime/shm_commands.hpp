@@ -1,6 +1,7 @@
 #pragma once
 
-// `prime` on a shared-memory domain: what it lists, measures, prints and sends.
+// The `prime` commands: the options they share, their exit codes, and each
+// command on a shared-memory domain and (optimus_*) on an Optimus one.
 
 #include <string>
 #include <vector>
@@ -41,8 +42,5 @@ int optimus_ls(const Options& o);
 int optimus_info(const Options& o);
 int optimus_watch(const Options& o, const std::string& command);  // hz, bw, delay, echo on a source
 int optimus_graph(const Options& o);
-
-// Set by Ctrl-C: long-running commands end at once, printing what they have.
-bool interrupted();
 
 }  // namespace prime::tool

@@ -51,7 +51,9 @@ struct pack<prime::Synced<Ts...>> {
     out.pack_array(2);
     out.pack(static_cast<const std::tuple<Ts...>&>(set));
     out.pack_array(sizeof...(Ts));
-    for (const auto stamp : set.stamps) out.pack(static_cast<std::int64_t>(stamp.time_since_epoch().count()));
+    for (const auto stamp : set.stamps)
+      out.pack(static_cast<std::int64_t>(
+          std::chrono::duration_cast<std::chrono::nanoseconds>(stamp.time_since_epoch()).count()));
     return out;
   }
 };
@@ -63,7 +65,8 @@ struct convert<prime::Synced<Ts...>> {
     const msgpack::object& stamps = o.via.array.ptr[1];
     if (stamps.type != msgpack::type::ARRAY || stamps.via.array.size != sizeof...(Ts)) throw msgpack::type_error();
     for (std::size_t i = 0; i < sizeof...(Ts); ++i)
-      set.stamps[i] = prime::Clock::time_point{prime::Clock::duration{stamps.via.array.ptr[i].as<std::int64_t>()}};
+      set.stamps[i] = prime::Clock::time_point{std::chrono::duration_cast<prime::Clock::duration>(
+          std::chrono::nanoseconds{stamps.via.array.ptr[i].as<std::int64_t>()})};
     return o;
   }
 };

@@ -141,8 +141,7 @@ class Batch {
       throw Failure{{Errc::limit_exceeded, "topic '" + owner_->writer.topic()->name() + "': a batch of " +
                                                  std::to_string(chunks_.size()) + " slots published with " +
                                                  std::to_string(stamps.size()) + " stamps"}};
-    const std::vector<std::size_t> sizes(chunks_.size(), size_);
-    owner_->writer.publish_some(chunks_, sizes, stamps);
+    owner_->writer.publish_some(chunks_, size_, stamps);
     chunks_.clear();
     detail::LoaningWriter::end_loan(std::exchange(owner_, nullptr));
   }

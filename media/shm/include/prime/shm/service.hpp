@@ -35,7 +35,7 @@ struct Wire {
   static T read(const std::byte* from, std::size_t) { return view(from, 0); }
   // The message where it lies.
   static const T& view(const std::byte* at, std::size_t) { return *std::launder(reinterpret_cast<const T*>(at)); }
-  using place = T&;  // where a request or reply is written in place
+  // Where a request or reply is written in place.
   static T& place_at(std::byte* at, std::size_t) { return *::new (at) T; }
 };
 template <>
@@ -51,7 +51,6 @@ struct Wire<Bytes> {
   }
   static value read(const std::byte* from, std::size_t size) { return value(from, from + size); }
   static std::span<const std::byte> view(const std::byte* at, std::size_t size) { return {at, size}; }
-  using place = std::span<std::byte>;
   static std::span<std::byte> place_at(std::byte* at, std::size_t capacity) { return {at, capacity}; }
 };
 

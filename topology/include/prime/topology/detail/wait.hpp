@@ -33,7 +33,7 @@ Waited spin_then_sleep(Ready&& ready, Sleep&& sleep, std::chrono::nanoseconds sp
                        const std::stop_token& stop, std::optional<Clock::time_point> now = std::nullopt) {
   if (ready()) return Waited::ready;
   if (spin > std::chrono::nanoseconds::zero()) {
-    const auto until = std::min(deadline, now.value_or(Clock::now()) + spin);
+    const auto until = std::min(deadline, (now ? *now : Clock::now()) + spin);
     do {
       for (int i = 0; i < 64; ++i) {  // a clock read costs more than a look
         if (ready()) return Waited::ready;

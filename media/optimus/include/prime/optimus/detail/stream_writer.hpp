@@ -115,13 +115,15 @@ class StreamState {
     std::vector<std::span<const std::pair<std::string, Clock::time_point>>> calls;
     for (std::size_t i = 0; i < messages.size(); i += kBatchEntries)
       calls.push_back(messages.subspan(i, std::min(kBatchEntries, messages.size() - i)));
+    std::vector<std::string> stamps;
+    std::vector<std::string_view> args;
     for (int attempt = 0; attempt < 2 && !calls.empty(); ++attempt) {
       const auto sha = script_sha(c, Script::batch);
       if (!sha) return std::unexpected(std::move(sha.error()));
       for (const auto& call : calls) {
-        std::vector<std::string> stamps;
-        stamps.reserve(call.size());
-        std::vector<std::string_view> args{"EVALSHA", *sha, "1", key_, maxlen_};
+        stamps.clear();
+        stamps.reserve(call.size());  // no reallocation: args holds views of these
+        args.assign({"EVALSHA", *sha, "1", key_, maxlen_});
         for (const auto& [message, stamp] : call) {
           stamps.push_back(std::to_string(stamp_ns(stamp)));
           args.push_back(stamps.back());

@@ -40,8 +40,6 @@ class Binding {
 
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
   [[nodiscard]] const ClientQos& qos() const noexcept { return qos_; }
-  [[nodiscard]] const Fingerprint& request_type() const noexcept { return request_; }
-  [[nodiscard]] const Fingerprint& reply_type() const noexcept { return reply_; }
 
   // The service with a live server and this client's slot in it, waiting
   // for one up to ClientQos::wait_for_service; or why not.

@@ -91,6 +91,14 @@ class Segment {
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
   [[nodiscard]] int fd() const noexcept { return object_.get_mapping_handle().handle; }
 
+  // Whether the name still leads to this segment.
+  [[nodiscard]] bool linked() const {
+    struct stat mine {}, named {};
+    const auto path = std::string{kShmDirectory} + "/" + name_;
+    return ::fstat(fd(), &mine) == 0 && ::stat(path.c_str(), &named) == 0 && mine.st_ino == named.st_ino &&
+           mine.st_dev == named.st_dev;
+  }
+
  private:
   Segment(std::string name, bip::shared_memory_object object) : name_{std::move(name)}, object_{std::move(object)} {}
 
@@ -107,14 +115,6 @@ class Segment {
   [[nodiscard]] std::size_t file_size() const {
     struct stat st {};
     return ::fstat(fd(), &st) == 0 ? static_cast<std::size_t>(st.st_size) : 0;
-  }
-
-  // Whether the name still leads to this segment.
-  [[nodiscard]] bool linked() const {
-    struct stat mine {}, named {};
-    const auto path = std::string{kShmDirectory} + "/" + name_;
-    return ::fstat(fd(), &mine) == 0 && ::stat(path.c_str(), &named) == 0 && mine.st_ino == named.st_ino &&
-           mine.st_dev == named.st_dev;
   }
 
   void reserve(std::size_t size, const std::string& what) {

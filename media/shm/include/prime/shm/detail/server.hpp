@@ -61,28 +61,26 @@ class Server {
     for (std::size_t i = 0; i < h.cell_count; ++i) service_->tail(i).answered.ring();  // callers see it gone
   }
 
-  [[nodiscard]] Service& service() const noexcept { return *service_; }
-
   // One worker: takes requests until `stop`, sleeping when there are none.
   void work(std::size_t index, const std::stop_token& stop) {
     auto& h = service_->header();
     std::stop_callback wake{stop, [&h] { h.requests.ring_always(); }};
     std::size_t start = index;  // workers look at the pending bits from different places
+    auto ready = [&] {
+      for (const auto& word : h.pending)
+        if (word.load(std::memory_order_relaxed) != 0) return true;
+      return false;
+    };
+    std::optional<Clock::time_point> next_check;  // read only once the worker sleeps: a busy one reads no clock
+    auto sleep = [&](Clock::time_point until) {
+      if (!next_check || Clock::now() >= *next_check) {  // idle: a good time to free what dead clients left
+        service_->reclaim_dead_clients();
+        next_check = Clock::now() + std::chrono::milliseconds{100};
+      }
+      h.requests.sleep_until(1ull << index, [&] { return ready() || stop.stop_requested(); },
+                             std::min(until, *next_check));
+    };
     while (true) {
-      auto ready = [&] {
-        for (const auto& word : h.pending)
-          if (word.load(std::memory_order_relaxed) != 0) return true;
-        return false;
-      };
-      std::optional<Clock::time_point> next_check;  // read only once the worker sleeps: a busy one reads no clock
-      auto sleep = [&](Clock::time_point until) {
-        if (!next_check || Clock::now() >= *next_check) {  // idle: a good time to free what dead clients left
-          service_->reclaim_dead_clients();
-          next_check = Clock::now() + std::chrono::milliseconds{100};
-        }
-        h.requests.sleep_until(1ull << index, [&] { return ready() || stop.stop_requested(); },
-                               std::min(until, *next_check));
-      };
       if (prime::detail::spin_then_sleep(ready, sleep, spin_, Clock::time_point::max(), stop) !=
           prime::detail::Waited::ready)
         return;

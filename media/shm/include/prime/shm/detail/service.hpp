@@ -86,11 +86,7 @@ class Service {
   }
   // Whether the name still leads to this segment (a server that came back
   // for other types made a new one).
-  [[nodiscard]] bool current() const {
-    struct stat mine {}, named {};
-    const auto path = std::string{kShmDirectory} + "/" + segment_name(registry_->domain(), "service", name_);
-    return ::fstat(segment_.fd(), &mine) == 0 && ::stat(path.c_str(), &named) == 0 && mine.st_ino == named.st_ino;
-  }
+  [[nodiscard]] bool current() const { return segment_.linked(); }
 
   [[nodiscard]] ServiceQos qos() const noexcept {
     const auto& h = *header_;

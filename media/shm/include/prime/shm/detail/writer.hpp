@@ -105,17 +105,17 @@ class Writer {
   // Hands a loaned chunk back unpublished.
   void discard(std::uint32_t chunk) noexcept { topic_->chunk(chunk).holders.fetch_and(~kLoanBit); }
 
-  // Publishes loaned chunks as the next sequences, in order, each with its
-  // size and stamp. Never waits. Every header first, then the ring entries
+  // Publishes loaned chunks of `size` bytes each as the next sequences, in
+  // order, chunk i stamped stamps[i]. Never waits. Every header first, then the ring entries
   // one after another, then the head and one wake: a subscriber polling the
   // ring fetches its line once for several samples, not once for each.
-  void publish_some(std::span<const std::uint32_t> chunks, std::span<const std::size_t> sizes,
+  void publish_some(std::span<const std::uint32_t> chunks, std::size_t size,
                     std::span<const Clock::time_point> stamps) noexcept {
     auto& h = topic_->header();
     const auto first = next_;
     for (std::size_t i = 0; i < chunks.size(); ++i) {
       auto& c = topic_->chunk(chunks[i]);
-      c.size = sizes[i];
+      c.size = size;
       c.stamp = stamps[i].time_since_epoch().count();
       c.seq.store(first + i, std::memory_order_release);
       c.holders.fetch_xor(kRingBit | kLoanBit);
