@@ -10,8 +10,6 @@
 //   Linked, Routed     the child serves a and b; the parent calls a | b (a's output goes
 //                      straight to b) or a, then b itself. Both services' workers sleep
 //                      (they share one CPU), so each hop costs a wake-up.
-#include <unistd.h>
-
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -29,7 +27,6 @@ namespace {
 namespace ipc = prime::bench::ipc;
 namespace shm = prime::shm;
 using namespace std::chrono_literals;
-
 
 shm::ServiceQos echo_qos(std::size_t bytes, std::chrono::microseconds spin) {
   return {.max_request_size = bytes, .max_reply_size = bytes, .spin = spin};
@@ -85,7 +82,7 @@ void round_trip(benchmark::State& state) {
 }
 void BM_RoundTrip_ShmService(benchmark::State& state) { round_trip<false>(state); }
 void BM_RoundTrip_ShmServiceSleeping(benchmark::State& state) { round_trip<true>(state); }
-BENCHMARK(BM_RoundTrip_ShmService)->Arg(64)->Arg(4 << 10)->Arg(64 << 10)->Arg(1 << 20)->UseRealTime();
+BENCHMARK(BM_RoundTrip_ShmService)->Apply(ipc::round_trip_payloads);
 BENCHMARK(BM_RoundTrip_ShmServiceSleeping)->Arg(64)->UseRealTime();
 
 // A client process calling the parent's service until stopped.

@@ -15,9 +15,6 @@
 //   ShmBatch         the same in batches: the child loans and publishes up to
 //                    kBatch at once (loan_some), the parent takes every
 //                    sample available, up to kBatch, in one read_some.
-#include <unistd.h>
-
-#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <string>
@@ -33,7 +30,6 @@ namespace {
 namespace ipc = prime::bench::ipc;
 namespace shm = prime::shm;
 using namespace std::chrono_literals;
-
 
 shm::TopicQos latency_qos(std::size_t bytes) { return {.capacity = 4, .max_message_size = bytes}; }
 shm::TopicQos stream_qos(std::size_t bytes) {

@@ -241,7 +241,7 @@ void BM_RedisBenchmark_XaddPipelined(benchmark::State& state) {
     state.SetIterationTime(kRequests / *rate);
   }
   state.SetItemsProcessed(state.iterations() * kRequests);
-  (void)redis_benchmark("-n 1 DEL bench-xadd");
+  (void)connect().command({"DEL", "bench-xadd"});
 }
 BENCHMARK(BM_RedisBenchmark_XaddPipelined)->Arg(64)->UseManualTime()->Iterations(3);
 

@@ -79,7 +79,7 @@ inline ApproximateMatch match_approximate(const std::vector<std::span<const Cloc
         const auto at = std::lower_bound(queues[i].begin(), queues[i].end(), m);
         if (at == queues[i].end()) {
           complete = false;
-          newest = std::max(newest, std::max(m, earliest_next[i]));
+          newest = std::max(newest, earliest_next[i]);  // newest >= m already
         } else {
           picks[i] = static_cast<std::size_t>(at - queues[i].begin());
           newest = std::max(newest, *at);
