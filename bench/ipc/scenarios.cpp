@@ -9,6 +9,16 @@
 //                  the last acknowledgement (last_ns, and its percentiles),
 //                  and publish_ns is what the publish itself cost the
 //                  publisher (waking the subscribers included).
+//   FanOutThroughput/<n>
+//                  the parent publishes 64 B samples back to back, one at a
+//                  time, on a `block` topic to n reader processes (1, 2, 4),
+//                  which take every sample available in one read_some:
+//                  msgs/s is the rate at which every reader gets every
+//                  message, losslessly.
+//   FanOutPublish/<n>
+//                  the same on a drop_oldest topic, so the publisher never
+//                  waits: publish_ns is what one loan + publish costs it while
+//                  n readers take samples.
 //   Loaded/64      Latency_Shm/64 (busy-polling on both sides) with a third
 //                  process burning 100 % of the publisher's CPU at the same
 //                  priority: the same counters, for the tail they get. The
@@ -211,6 +221,124 @@ void BM_FanOut_Shm(benchmark::State& state) {
 }
 // The time column is last_ns: the settling pauses are not timed.
 BENCHMARK(BM_FanOut_Shm)->Arg(1)->Arg(2)->Arg(4)->UseManualTime();
+
+// ---- FanOutThroughput, FanOutPublish -----------------------------------------
+
+// A topic as deep as the two-process throughput stream's, with room for every
+// reader to hold a batch: `block` (lossless) or `drop_oldest` (the publisher
+// never waits).
+constexpr std::size_t kReadBatch = 32;
+shm::TopicQos fan_out_stream_qos(prime::Overflow overflow) {
+  return {.capacity = ipc::kStreamDepth, .max_message_size = kBytes, .overflow = overflow,
+          .block_timeout = 10s, .max_subscribers = kMaxFanOut, .max_held = kReadBatch};
+}
+prime::Overflow overflow_named(const std::string& name) {
+  return name == "block" ? prime::Overflow::block : prime::Overflow::drop_oldest;
+}
+// Messages per timed iteration.
+constexpr std::uint64_t kFanOutRound = 4096;
+
+// Child: reader number arg(1) of topic "stream" in domain arg(0), whose
+// overflow policy is arg(2). Takes every sample available (up to kReadBatch)
+// in one read_some, checks that the sequence only goes up (and, lossless,
+// that nothing is missing), and acknowledges the last one it took on its own
+// line.
+void fan_out_reader(ipc::Child& self) {
+  const auto overflow = overflow_named(self.arg(2));
+  shm::Core core{self.arg(0)};
+  auto in = core.subscribe<shm::Bytes>("stream", {}, fan_out_stream_qos(overflow)).subscribe();
+  auto mapping = ipc::SharedMapping::adopt(self.fd(0), sizeof(Acks));
+  auto& ack = mapping.as<Acks>().of[parse<std::size_t>(self.arg(1))];
+  std::vector<prime::Sample<shm::View<shm::Bytes>>> taken;
+  taken.reserve(kReadBatch);
+  self.ready();
+  for (std::uint64_t last = 0;;) {
+    taken.clear();
+    if (!in.read_some(taken, kReadBatch, prime::Clock::now() + 50ms)) {
+      self.check();
+      continue;
+    }
+    for (const auto& sample : taken) {
+      const auto seq = ipc::seq_of(sample.value.bytes().data());
+      if (seq <= last || (overflow == prime::Overflow::block && seq != last + 1)) throw ipc::out_of_sequence(last + 1, seq);
+      last = seq;
+    }
+    ack.seq.store(last, std::memory_order_release);
+  }
+}
+const ipc::ChildEntry kFanOutReader{"Scenario.fan_out_reader", fan_out_reader};
+
+// The parent publishes on "stream" to `readers` reader processes; once every
+// reader has the first sample, `timed(children, publisher, all_have, seq)`
+// runs the timed iterations, where all_have(s) tells whether every reader has
+// acknowledged s and `seq` is the last sequence published.
+template <class Timed>
+void fan_out_stream(std::size_t readers, prime::Overflow overflow, Timed timed) {
+  if (readers == 0 || readers > kMaxFanOut) throw std::invalid_argument{"fan-out: 1 to 4 readers"};
+  const auto domain = ipc::new_shm_domain();
+  shm::Core core{domain};
+  auto stream = core.publisher<shm::Bytes>("stream", fan_out_stream_qos(overflow));
+  auto mapping = ipc::SharedMapping::create("prime-ipc-acks", sizeof(Acks));
+  auto& acks = mapping.construct<Acks>();
+  ipc::Links children;
+  const std::string policy = overflow == prime::Overflow::block ? "block" : "drop_oldest";
+  for (std::size_t i = 0; i < readers; ++i)
+    children.start("Scenario.fan_out_reader", kBytes, {mapping.fd()}, {domain, std::to_string(i), policy});
+  children.wait_ready();
+  children.go();
+  // Every reader has read something: all of them are in the topic's ring.
+  std::uint64_t seq = 0;
+  auto all_have = [&](std::uint64_t at) {
+    for (std::size_t i = 0; i < readers; ++i)
+      if (acks.of[i].seq.load(std::memory_order_acquire) < at) return false;
+    return true;
+  };
+  send(stream, ++seq);
+  ipc::spin_until(children, [&] { return all_have(seq); });
+  timed(children, stream, all_have, seq);
+  children.stop();
+}
+
+// Lossless: msgs/s is the rate at which every reader gets every message. The
+// readers share the second CPU, so with n > 1 they take turns on it.
+void BM_FanOutThroughput_Shm(benchmark::State& state) {
+  ipc::run(state, [&](std::size_t readers) {
+    fan_out_stream(readers, prime::Overflow::block, [&](ipc::Links& children, auto& stream, auto all_have, std::uint64_t& seq) {
+      auto round = [&] {
+        for (std::uint64_t i = 0; i < kFanOutRound; ++i) send(stream, ++seq);
+        ipc::spin_until(children, [&] { return all_have(seq); });
+      };
+      round();  // untimed: page faults, cold caches
+      const auto start = Clock::now();
+      for (auto _ : state) round();
+      const std::chrono::duration<double> elapsed = Clock::now() - start;
+      state.counters["msgs/s"] = static_cast<double>(state.iterations() * kFanOutRound) / elapsed.count();
+      state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(kFanOutRound));
+    });
+  });
+}
+BENCHMARK(BM_FanOutThroughput_Shm)->Arg(1)->Arg(2)->Arg(4)->UseRealTime();
+
+// What a publish costs the publisher with n readers taking samples meanwhile:
+// drop_oldest, so it never waits for them, and publish_ns is its time per
+// loan + publish, back to back (it has the first CPU to itself). What grows
+// with n is the cache lines the readers touch and the publisher then takes
+// back.
+void BM_FanOutPublish_Shm(benchmark::State& state) {
+  ipc::run(state, [&](std::size_t readers) {
+    fan_out_stream(readers, prime::Overflow::drop_oldest, [&](ipc::Links& children, auto& stream, auto, std::uint64_t& seq) {
+      for (std::uint64_t i = 0; i < kFanOutRound; ++i) send(stream, ++seq);  // untimed
+      const auto start = Clock::now();
+      for (auto _ : state) {
+        for (std::uint64_t i = 0; i < kFanOutRound; ++i) send(stream, ++seq);
+        children.check();
+      }
+      const std::chrono::duration<double, std::nano> elapsed = Clock::now() - start;
+      state.counters["publish_ns"] = elapsed.count() / static_cast<double>(state.iterations() * kFanOutRound);
+    });
+  });
+}
+BENCHMARK(BM_FanOutPublish_Shm)->Arg(1)->Arg(2)->Arg(4)->UseRealTime();
 
 // ---- Loaded ----------------------------------------------------------------
 

@@ -73,6 +73,16 @@ long long integer(Redis& r, const std::vector<std::string>& words) {
   return reply->type == REDIS_REPLY_INTEGER ? reply->integer : 0;
 }
 
+// A source's readers: the "r<id>" fields of its readers hash (a reader that
+// has lost values also has an "l<id>" field there).
+long long readers(Redis& r, const Options& o, const std::string& source) {
+  auto reply = r.command({"HKEYS", o.domain + ":readers:" + source});
+  long long n = 0;
+  for (std::size_t i = 0; i < reply->elements; ++i)
+    if (reply->element[i]->len > 0 && reply->element[i]->str[0] == 'r') ++n;
+  return n;
+}
+
 // "0123456789abcdef Pose (24 bytes, ...)" -> "Pose (24 bytes, ...)"
 std::string described(const std::string& record) {
   const auto space = record.find(' ');
@@ -100,7 +110,7 @@ int optimus_ls(const Options& o) {
     for (const auto& [name, record] : e.sources) {
       out += std::string{first ? "" : ","} + "{\"name\":" + quote(name) + ",\"type\":" + quote(described(record)) +
              ",\"length\":" + std::to_string(integer(r, {"XLEN", o.domain + ":src:" + name})) + ",\"readers\":" +
-             std::to_string(integer(r, {"HLEN", o.domain + ":readers:" + name})) + "}";
+             std::to_string(readers(r, o, name)) + "}";
       first = false;
     }
     out += "],\"services\":[";
@@ -117,7 +127,7 @@ int optimus_ls(const Options& o) {
   Table sources{{"NAME", "TYPE", "IN STREAM", "READERS"}};
   for (const auto& [name, record] : e.sources)
     sources.add({name, described(record), std::to_string(integer(r, {"XLEN", o.domain + ":src:" + name})),
-                 std::to_string(integer(r, {"HLEN", o.domain + ":readers:" + name}))});
+                 std::to_string(readers(r, o, name))});
   sources.print(std::cout);
   std::cout << "\nSERVICES\n";
   Table services{{"NAME", "TYPES", "ALIVE"}};
@@ -133,7 +143,7 @@ int optimus_info(const Options& o) {
   if (auto s = e.sources.find(o.name); s != e.sources.end()) {
     std::cout << "source " << o.name << "\n  type: " << described(s->second) << "\n  stream: " << o.domain << ":src:" << o.name
               << "\n  in stream: " << integer(r, {"XLEN", o.domain + ":src:" + o.name})
-              << "\n  readers: " << integer(r, {"HLEN", o.domain + ":readers:" + o.name}) << '\n';
+              << "\n  readers: " << readers(r, o, o.name) << '\n';
     return kOk;
   }
   if (auto v = e.services.find(o.name); v != e.services.end()) {

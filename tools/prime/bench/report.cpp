@@ -149,6 +149,34 @@ std::string scenarios_table(const Results& r) {
   return out.str();
 }
 
+// Fan-out at 64 B: the lossless rate and the publisher's own cost per message
+// against the number of reader processes, and what each added reader costs
+// the publisher, beside one cache-line transfer (the floor's one-way latency).
+std::string fan_out_throughput_table(const Results& r) {
+  std::ostringstream out;
+  out << "| readers | lossless rate | × 1 reader | publisher's time per message (drop_oldest) | added per extra reader |\n"
+         "|---:|---:|---:|---:|---:|\n";
+  const auto rate_1 = r.find("Shm", "fanout-throughput-1", 64, "rate");
+  const auto publish_1 = r.find("Shm", "fanout-publish-1", 64, "publish");
+  bool any = false;
+  for (const int n : {1, 2, 4}) {
+    const auto rate = r.find("Shm", "fanout-throughput-" + std::to_string(n), 64, "rate");
+    const auto publish = r.find("Shm", "fanout-publish-" + std::to_string(n), 64, "publish");
+    if (!rate && !publish) continue;
+    any = true;
+    out << "| " << n << " | " << (rate ? rate_text(*rate) : "–") << " | " << ratio_text(divide(rate, rate_1)) << " | "
+        << (publish ? time_text(*publish) : "–") << " | ";
+    if (n > 1 && publish && publish_1) out << time_text((*publish - *publish_1) / (n - 1));
+    else out << "–";
+    out << " |\n";
+  }
+  if (!any) return "No figures.\n";
+  if (const auto line = r.find("Floor", "latency", 64, "p50"))
+    out << "\nOne cache-line transfer between the two CPUs (the floor's one-way latency at 64 B, p50, same run): "
+        << time_text(*line) << ". The readers share the second CPU, so with more than one they take turns on it.\n";
+  return out.str();
+}
+
 std::string table1_table(const Results& r) {
   std::vector<std::string> scenarios;
   for (const auto& f : r.figures)
@@ -389,6 +417,7 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
   image("fan-out", "fan-out");
   image("sleeping", "sleeping subscribers");
   md << scenarios_table(results) << '\n';
+  md << "### Fan-out throughput\n\n" << fan_out_throughput_table(results) << '\n';
   md << "## Table 1: chains in one process\n\n";
   image("table1", "Table 1");
   md << table1_table(results) << '\n';

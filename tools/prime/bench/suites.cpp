@@ -83,6 +83,8 @@ void read_ipc(const Json& run, Results& out) {
   else if (kind == "RoundTrip") add_counters(run, who, "round-trip" + suffix, argument, 2, out);
   else if (kind == "Calls") add_counters(run, who, "calls-" + parts[1] + "-clients", 64, 1, out);
   else if (kind == "FanOut") add_counters(run, who, "fan-out-" + parts[1], 64, 1, out);
+  else if (kind == "FanOutThroughput") add_counters(run, who, "fanout-throughput-" + parts[1], 64, 1, out);
+  else if (kind == "FanOutPublish") add_counters(run, who, "fanout-publish-" + parts[1], 64, 1, out);
   else if (kind == "Sleeping") add_counters(run, who, "sleeping-" + parts[1] + "hz", 64, 1, out);
 }
 
@@ -159,7 +161,7 @@ std::vector<Suite> suites() {
        .title = "two processes: Shm, its services and their peers",
        .binary = "ipc/prime_ipc",
        .quick_filter = "^BM_(Latency|Throughput|RoundTrip)_[A-Za-z]+/(64|1048576)/"
-                       "|^BM_Calls_ShmService/1/|^BM_FanOut_Shm/[14]/|^BM_Loaded_|^BM_Sleeping_Shm/1000/",
+                       "|^BM_Calls_ShmService/1/|^BM_FanOut(Throughput|Publish)?_Shm/[14]/|^BM_Loaded_|^BM_Sleeping_Shm/1000/",
        .quick_min_time = 0.05,
        .full_min_time = 0.2,
        .full_repetitions = 3,

@@ -20,8 +20,11 @@ namespace prime {
 
 namespace detail {
 
-// Fans each published value out to every reader's own bounded queue: the last
-// reader gets the value moved, the others a copy.
+// Fans each published value out to every reader's own bounded queue. One
+// reader gets the value moved; several share it, and each copies it only when
+// it reads it while another reader still holds it (SharedSample), so the
+// publisher never copies and a large value is not copied for readers that
+// drop it.
 //
 // Thread-safe: publish, attach and detach may run concurrently.
 template <class T>
@@ -39,10 +42,16 @@ class Hub {
   void publish(Sample<T>&& sample, std::stop_token stop) {
     auto readers = snapshot();
     const auto n = readers->size();
-    for (std::size_t i = 0; i + 1 < n; ++i) {
-      if constexpr (std::copy_constructible<T>) deliver(*(*readers)[i], Sample<T>{sample}, stop);
+    if (n == 0) return;
+    if constexpr (std::copy_constructible<T>) {
+      if (n > 1) {
+        auto last = SharedSample<T>::share(std::move(sample), n);
+        for (std::size_t i = 0; i + 1 < n; ++i) deliver(*(*readers)[i], last.claim(), stop);
+        deliver(*readers->back(), std::move(last), stop);
+        return;
+      }
     }
-    if (n > 0) deliver(*readers->back(), std::move(sample), stop);
+    deliver(*readers->back(), std::move(sample), stop);
   }
 
   [[nodiscard]] std::shared_ptr<Queue<T>> attach(const Qos& qos) {
@@ -74,8 +83,8 @@ class Hub {
     return readers_;
   }
 
-  void deliver(Queue<T>& queue, Sample<T>&& sample, std::stop_token stop) {
-    if (queue.push(std::move(sample), std::move(stop)) != Queue<T>::Pushed::timed_out) return;
+  void deliver(Queue<T>& queue, typename Queue<T>::Entry&& entry, std::stop_token stop) {
+    if (queue.push(std::move(entry), std::move(stop)) != Queue<T>::Pushed::timed_out) return;
     if (auto runtime = runtime_.lock())
       runtime->report({Errc::overflow, "source '" + name_ + "': a reader made no room within " +
                                            std::to_string(qos_.block_timeout.count()) +

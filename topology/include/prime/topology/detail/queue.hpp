@@ -9,17 +9,22 @@
 #include <mutex>
 #include <optional>
 #include <stop_token>
+#include <utility>
+#include <variant>
 #include <vector>
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
+#include "prime/topology/detail/shared_sample.hpp"
 #include "prime/topology/detail/wait.hpp"
 #include "prime/topology/qos.hpp"
 
 namespace prime::detail {
 
 // One reader's bounded buffer: a ring of `capacity` slots that never grows.
-// Many writers (every producer of the source), one reader.
+// Many writers (every producer of the source), one reader. A slot holds the
+// reader's own value, or its claim on a value shared with other readers,
+// which the reader copies or moves out after it has let the lock go.
 //
 // Thread-safe. Writers and the reader only touch the condition variables when
 // the other side is known to be waiting, so a steady stream costs one
@@ -28,13 +33,15 @@ template <class T>
 class Queue {
  public:
   enum class Pushed { delivered, dropped_oldest, timed_out, stopped, closed };
+  using Entry = std::variant<Sample<T>, SharedSample<T>>;
 
   explicit Queue(const Qos& qos)
       : slots_(qos.capacity), overflow_{qos.overflow}, block_timeout_{qos.block_timeout}, spin_{qos.spin} {
     assert(qos.capacity > 0);
   }
 
-  Pushed push(Sample<T>&& sample, std::stop_token stop) {
+  // Leaves `entry` as it was unless it was delivered.
+  Pushed push(Entry&& entry, std::stop_token stop) {
     std::unique_lock lock{mutex_};
     if (closed_) return Pushed::closed;
     auto result = Pushed::delivered;
@@ -55,7 +62,7 @@ class Queue {
         }
       }
     }
-    slots_[(head_ + size_) % slots_.size()].emplace(std::move(sample));
+    slots_[(head_ + size_) % slots_.size()].emplace(std::move(entry));
     ++size_;
     const bool wake_reader = waiting_readers_ > 0;
     lock.unlock();  // the woken reader should not find the lock still taken
@@ -66,28 +73,31 @@ class Queue {
   [[nodiscard]] std::optional<Sample<T>> try_pop() {
     std::unique_lock lock{mutex_};
     if (size_ == 0) return std::nullopt;
-    auto sample = take_front();
+    auto entry = take_front();
     wake_writers(lock);
-    return sample;
+    return resolve(std::move(entry));
   }
 
   [[nodiscard]] std::expected<Sample<T>, Errc> pop_until(Clock::time_point deadline, std::stop_token stop) {
     std::unique_lock lock{mutex_};
     if (auto waited = wait_for_value(lock, deadline, std::move(stop)); !waited) return std::unexpected(waited.error());
-    auto sample = take_front();
+    auto entry = take_front();
     wake_writers(lock);
-    return sample;
+    return resolve(std::move(entry));
   }
 
-  // Waits for one value, then moves up to `max` into `out` under one lock, and
-  // wakes the waiting writers once for all of them.
+  // Waits for one value, then takes up to `max` under one lock, wakes the
+  // waiting writers once for all of them, and moves them into `out`.
   [[nodiscard]] std::expected<std::size_t, Errc> pop_some(std::vector<Sample<T>>& out, std::size_t max,
                                                           Clock::time_point deadline, std::stop_token stop) {
     std::unique_lock lock{mutex_};
     if (auto waited = wait_for_value(lock, deadline, std::move(stop)); !waited) return std::unexpected(waited.error());
-    std::size_t n = 0;
-    for (; n < max && size_ > 0; ++n) out.push_back(take_front());
+    taken_.clear();
+    while (taken_.size() < max && size_ > 0) taken_.push_back(take_front());
     wake_writers(lock);
+    for (auto& entry : taken_) out.push_back(resolve(std::move(entry)));
+    const auto n = taken_.size();
+    taken_.clear();
     return n;
   }
 
@@ -104,13 +114,18 @@ class Queue {
   }
 
  private:
-  Sample<T> take_front() {
+  Entry take_front() {
     auto& slot = slots_[head_];
-    Sample<T> sample = std::move(*slot);
+    Entry entry = std::move(*slot);
     slot.reset();
     head_ = (head_ + 1) % slots_.size();
     --size_;
-    return sample;
+    return entry;
+  }
+
+  static Sample<T> resolve(Entry&& entry) {
+    if (auto* own = std::get_if<Sample<T>>(&entry)) return std::move(*own);
+    return std::get<SharedSample<T>>(std::move(entry)).take();
   }
 
   // With the lock held on entry and on return: until a value is in the
@@ -145,7 +160,8 @@ class Queue {
   mutable std::mutex mutex_;
   std::condition_variable_any not_empty_;
   std::condition_variable_any not_full_;
-  std::vector<std::optional<Sample<T>>> slots_;
+  std::vector<std::optional<Entry>> slots_;
+  std::vector<Entry> taken_;  // the reader's: what pop_some took, outside the lock
   std::size_t head_ = 0;
   std::atomic<std::size_t> size_ = 0;  // written under the lock; read without it only to spin
   std::uint64_t lost_ = 0;

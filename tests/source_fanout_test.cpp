@@ -1,0 +1,139 @@
+// How an in-process source hands one value to several readers: shared, and
+// copied only by a reader that takes it while another reader still holds it,
+// never by the publisher.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <mutex>
+#include <set>
+#include <thread>
+#include <vector>
+
+#include "prime/topology/local_source.hpp"
+
+namespace prime::test {
+namespace {
+
+using namespace std::chrono_literals;
+
+// A value that counts its copies and remembers which threads made them.
+struct Counted {
+  static inline std::atomic<int> copies = 0;
+  static inline std::mutex mutex;
+  static inline std::set<std::thread::id> copied_on;
+
+  int value = 0;
+  std::vector<int> payload;
+
+  Counted(int v, std::size_t size) : value{v}, payload(size, v) {}
+  Counted(const Counted& other) : value{other.value}, payload{other.payload} {
+    ++copies;
+    std::scoped_lock lock{mutex};
+    copied_on.insert(std::this_thread::get_id());
+  }
+  Counted(Counted&&) noexcept = default;
+  Counted& operator=(const Counted&) = delete;
+  Counted& operator=(Counted&&) noexcept = default;
+  ~Counted() = default;
+
+  [[nodiscard]] bool intact() const {
+    for (int x : payload)
+      if (x != value) return false;
+    return true;
+  }
+};
+
+class SourceFanOut : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    Counted::copies = 0;
+    Counted::copied_on.clear();
+  }
+  static LocalSource<Counted> source(Qos qos = {}) { return {"counted", qos, {}, Graph{}}; }
+};
+
+TEST_F(SourceFanOut, AValueForOneReaderIsNeverCopied) {
+  auto counted = source();
+  auto reader = counted.subscribe();
+  for (int i = 0; i < 10; ++i) counted.publish({i, 64});
+  for (int i = 0; i < 10; ++i) EXPECT_EQ(reader.try_read()->value.value, i);
+  EXPECT_EQ(Counted::copies, 0);
+}
+
+TEST_F(SourceFanOut, OnlyAReaderThatTakesTheValueWhileAnotherHoldsItCopiesIt) {
+  auto counted = source();
+  auto first = counted.subscribe();
+  auto second = counted.subscribe();
+  auto third = counted.subscribe();
+  counted.publish({7, 64});
+  EXPECT_EQ(Counted::copies, 0) << "the publisher copied";
+
+  ASSERT_TRUE(first.try_read()->value.intact());
+  EXPECT_EQ(Counted::copies, 1);
+  ASSERT_TRUE(second.try_read()->value.intact());
+  EXPECT_EQ(Counted::copies, 2);
+  auto last = third.try_read();
+  EXPECT_EQ(Counted::copies, 2) << "the last reader holding the value should get it moved";
+  EXPECT_EQ(last->value.value, 7);
+  EXPECT_TRUE(last->value.intact());
+}
+
+TEST_F(SourceFanOut, AValueALossyReaderDroppedIsMovedToTheOtherReader) {
+  auto counted = source();
+  auto lossy = counted.subscribe({.capacity = 1, .overflow = Overflow::drop_oldest});
+  auto other = counted.subscribe();
+  counted.publish({1, 64});
+  counted.publish({2, 64});  // pushes value 1 out of the lossy reader's buffer
+  EXPECT_EQ(lossy.lost(), 1u);
+
+  EXPECT_EQ(other.try_read()->value.value, 1);
+  EXPECT_EQ(Counted::copies, 0) << "value 1 had one claim left";
+}
+
+TEST_F(SourceFanOut, AValueAReaderLeftUnreadIsMovedToTheOtherReader) {
+  auto counted = source();
+  auto other = counted.subscribe();
+  {
+    auto gone = counted.subscribe();
+    counted.publish({3, 64});
+  }
+  EXPECT_EQ(other.try_read()->value.value, 3);
+  EXPECT_EQ(Counted::copies, 0);
+}
+
+// Readers taking one value at the same moment may each copy it (neither can
+// know the other is done with it), so the count of copies is not exact here;
+// where they are made is.
+TEST_F(SourceFanOut, ReadersOnTheirOwnThreadsGetEveryValueIntactAndMakeTheCopiesThemselves) {
+  constexpr int kReaders = 3;
+  constexpr int kValues = 2000;
+  auto counted = source({.capacity = 16, .overflow = Overflow::block});
+  std::vector<Reader<Counted>> readers;
+  for (int r = 0; r < kReaders; ++r) readers.push_back(counted.subscribe());
+
+  std::atomic<int> intact = 0;
+  std::mutex mutex;
+  std::set<std::thread::id> reader_threads;
+  {
+    std::vector<std::jthread> threads;
+    for (auto& reader : readers)
+      threads.emplace_back([&] {
+        {
+          std::scoped_lock lock{mutex};
+          reader_threads.insert(std::this_thread::get_id());
+        }
+        for (int i = 0; i < kValues; ++i) {
+          auto s = reader.read_for(30s);
+          if (s && s->value.value == i && s->value.intact()) ++intact;
+        }
+      });
+    for (int i = 0; i < kValues; ++i) counted.publish({i, 256});
+  }
+  EXPECT_EQ(intact, kReaders * kValues);
+  EXPECT_GE(Counted::copies, (kReaders - 1) * kValues) << "each reader needs a value of its own";
+  for (const auto& id : Counted::copied_on) EXPECT_TRUE(reader_threads.contains(id)) << "a copy made off the readers' threads";
+}
+
+}  // namespace
+}  // namespace prime::test
