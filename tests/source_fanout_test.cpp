@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -59,6 +60,14 @@ TEST_F(SourceFanOut, AValueForOneReaderIsNeverCopied) {
   for (int i = 0; i < 10; ++i) counted.publish({i, 64});
   for (int i = 0; i < 10; ++i) EXPECT_EQ(reader.try_read()->value.value, i);
   EXPECT_EQ(Counted::copies, 0);
+}
+
+TEST_F(SourceFanOut, AMoveOnlyValueReachesItsOneReader) {
+  LocalSource<std::unique_ptr<int>> owned{"owned", {}, {}, Graph{}};
+  auto reader = owned.subscribe();
+  owned.publish(std::make_unique<int>(5));
+  EXPECT_EQ(*reader.try_read()->value, 5);
+  EXPECT_THROW((void)owned.subscribe(), Failure) << "a second reader would need a copy";
 }
 
 TEST_F(SourceFanOut, OnlyAReaderThatTakesTheValueWhileAnotherHoldsItCopiesIt) {

@@ -289,6 +289,16 @@ std::optional<double> worst_table1_ratio(const Results& r, const std::string& wh
   return worst;
 }
 
+// Sources' throughput over the CCR-like peer's in the Table 1 row where it is least.
+std::optional<double> worst_sources_ratio(const Results& r) {
+  std::optional<double> worst;
+  for (const auto& f : r.figures)
+    if (f.who == "Sources" && f.scenario.starts_with("table1-"))
+      if (const auto ratio = divide(r.find("CcrLike", f.scenario, f.payload, "per hop"), f.value))
+        worst = std::min(worst.value_or(*ratio), *ratio);
+  return worst;
+}
+
 std::string headline(const Results& r) {
   std::ostringstream out;
   out << "| what | Prime | ratios |\n|---|---:|---|\n";
@@ -330,6 +340,10 @@ std::string headline(const Results& r) {
   row("Shm lossless throughput in batches (loan_some / read_some), 64 B", r.find("ShmBatch", "throughput", 64, "rate"), true,
       {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
        {"Shm one at a time", r.find("Shm", "throughput", 64, "rate")}});
+  row("Shm publish to 4 reader processes, 64 B (publisher's time per message)",
+      r.find("Shm", "fanout-publish-4", 64, "publish"), false,
+      {{"1 reader", r.find("Shm", "fanout-publish-1", 64, "publish")},
+       {"cache-line floor", p50("Floor", "latency", 64)}});
   row("Shm service round trip, 64 B, p50", p50("ShmService", "round-trip", 64), false,
       {{"iceoryx request/response", p50("Iceoryx", "round-trip", 64)},
        {"Unix socket", p50("UnixSocket", "round-trip", 64)}});
@@ -337,6 +351,8 @@ std::string headline(const Results& r) {
     out << "| Radiant vs FOR (worst Table 1 row) | | " << ratio_text(radiant) << " |\n";
   if (const auto liberty = worst_table1_ratio(r, "Liberty"))
     out << "| Liberty vs FOR (worst Table 1 row) | | " << ratio_text(liberty) << " |\n";
+  if (const auto sources = worst_sources_ratio(r))
+    out << "| Sources throughput vs CCR-like (worst Table 1 row) | | " << ratio_text(sources) << " |\n";
   row("Optimus hop", r.find("Optimus", "hop", 0, "mean"), false,
       {{"hiredis request/reply", r.find("hiredis", "request-reply", 0, "mean")},
        {"PING", r.find("hiredis", "ping", 0, "mean")}});

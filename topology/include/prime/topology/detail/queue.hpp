@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <atomic>
 #include <cassert>
+#include <concepts>
 #include <condition_variable>
 #include <cstdint>
 #include <expected>
 #include <mutex>
 #include <optional>
 #include <stop_token>
+#include <type_traits>
 #include <utility>
 #include <variant>
 #include <vector>
@@ -33,7 +35,9 @@ template <class T>
 class Queue {
  public:
   enum class Pushed { delivered, dropped_oldest, timed_out, stopped, closed };
-  using Entry = std::variant<Sample<T>, SharedSample<T>>;
+  // A move-only value has one reader, so it is never shared.
+  using Entry = std::conditional_t<std::copy_constructible<T>, std::variant<Sample<T>, SharedSample<T>>,
+                                   std::variant<Sample<T>>>;
 
   explicit Queue(const Qos& qos)
       : slots_(qos.capacity), overflow_{qos.overflow}, block_timeout_{qos.block_timeout}, spin_{qos.spin} {
@@ -124,8 +128,9 @@ class Queue {
   }
 
   static Sample<T> resolve(Entry&& entry) {
-    if (auto* own = std::get_if<Sample<T>>(&entry)) return std::move(*own);
-    return std::get<SharedSample<T>>(std::move(entry)).take();
+    if constexpr (std::copy_constructible<T>)
+      if (auto* shared = std::get_if<SharedSample<T>>(&entry)) return std::move(*shared).take();
+    return std::get<Sample<T>>(std::move(entry));
   }
 
   // With the lock held on entry and on return: until a value is in the

@@ -13,9 +13,10 @@ namespace prime::detail {
 // publish time: every reader's queue holds a SharedSample of the same value,
 // and each reader takes it when it reads. A reader that is the last one still
 // holding the value gets it moved; the others copy it then, on their own
-// thread. So a value for two readers is copied at most once, by a reader that
-// needs it while the other still does, never by the publisher for readers that
-// may drop it, and a single reader never copies at all.
+// thread. So the publisher never copies, a reader that drops the value
+// unread costs no copy, and readers that read one after the other make one
+// copy fewer than there are readers (two reading at the same moment may both
+// copy: neither can know the other is done with it).
 //
 // A SharedSample is one reader's claim: dropping it untaken (a queue that
 // drops its oldest value, a closed queue, a push that timed out) gives the
