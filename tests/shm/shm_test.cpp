@@ -192,6 +192,24 @@ TEST_F(ShmTest, BlockWaitsForTheSlowestSubscriberAndLosesNothing) {
   EXPECT_EQ(a.lost() + b.lost(), 0u);
 }
 
+// A reader tells a `block` publisher how far it has read in steps (an eighth
+// of the ring), not per sample, and all of it before it waits: the publisher
+// never waits for samples a waiting reader has read.
+TEST_F(ShmTest, WhatAReaderHasReadIsAcknowledgedBeforeItWaits) {
+  const shm::TopicQos qos{.capacity = 32, .overflow = Overflow::block, .block_timeout = 50ms};
+  auto publisher = core.publisher<int>("steps", qos);
+  auto reader = core.subscribe<int>("steps", {}, qos).subscribe();
+  auto errors = core.errors().subscribe();
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(publisher.publish(i));
+  for (int i = 0; i < 3; ++i) ASSERT_EQ(*reader.try_read()->value, i);  // fewer than a step of 4
+  ASSERT_FALSE(reader.read_for(1ms)) << "nothing more was published";
+  // The ring holds 32 from sequence 3 on: all of them go without waiting.
+  for (int i = 3; i < 35; ++i) ASSERT_TRUE(publisher.publish(i));
+  EXPECT_FALSE(errors.try_read()) << "the publisher waited for the reader";
+  for (int i = 3; i < 35; ++i) ASSERT_EQ(*reader.try_read()->value, i);
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
 TEST_F(ShmTest, BoundedTypesCarryVariableContent) {
   auto publisher = core.publisher<Scan>("scan");
   auto reader = core.subscribe<Scan>("scan").subscribe();

@@ -38,7 +38,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   SubscriptionReader(std::shared_ptr<detail::Topic> topic, SubscribeQos qos,
                      std::weak_ptr<prime::detail::RuntimeState> runtime, bool observer = false,
                      std::shared_ptr<const void> feed = {})
-      : subscriber_{std::make_shared<detail::Subscriber>(std::move(topic), qos.history, observer)},
+      : subscriber_{detail::Subscriber::create(std::move(topic), qos.history, observer)},
         spin_{qos.spin},
         runtime_{std::move(runtime)},
         feed_{std::move(feed)} {}
@@ -83,7 +83,10 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   // one sample of the budget, and skips what is older.
   void read_latest(std::optional<Sample<View<T>>>& latest) override {
     auto& cursor = subscriber_->cursor();
-    if (!cursor.ready()) return;
+    if (!cursor.ready()) {
+      cursor.acknowledge();  // nothing new: the publisher may as well know it
+      return;
+    }
     cursor.skip_to_newest();
     if (subscriber_->at_budget()) latest.reset();
     if (auto s = try_read()) latest = std::move(s);
@@ -93,7 +96,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
 
  private:
   Sample<View<T>> sample(const detail::Taken& taken) {
-    View<T> view{subscriber_, taken.chunk, taken.seq};
+    View<T> view{subscriber_.get(), taken.chunk, taken.seq};
     const auto stamp = view.stamp();
     return {std::move(view), stamp};
   }
@@ -125,6 +128,9 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
                               released.ring_always();
                             }};
     auto stopped = [&] { return Error{Errc::stopped, "source '" + cursor.topic()->name() + "': stopped while waiting"}; };
+    // What it has read is acknowledged before it waits: a `block` publisher
+    // may be waiting for it.
+    if (subscriber_->at_budget() || !cursor.ready()) cursor.acknowledge();
     if (subscriber_->at_budget()) {
       auto room = [&] { return !subscriber_->at_budget(); };
       auto sleep = [&](Clock::time_point until) {
@@ -144,7 +150,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     return {};
   }
 
-  std::shared_ptr<detail::Subscriber> subscriber_;
+  detail::SubscriberOwner subscriber_;
   std::chrono::microseconds spin_;
   std::weak_ptr<prime::detail::RuntimeState> runtime_;
   std::shared_ptr<const void> feed_;

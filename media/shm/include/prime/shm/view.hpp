@@ -21,7 +21,8 @@ class SubscriptionReader;
 
 // A sample read in place in the topic's shared memory: no copy is made, and
 // the publisher does not reuse its slot while any view of it lives. Copies
-// share the slot (and count once against the subscriber's max_held).
+// share the slot (and count once against the subscriber's max_held). A view
+// may outlive its reader.
 // Converts to `const T&`, so a chain taking T (or const T&) links after a
 // subscription.
 //
@@ -30,9 +31,9 @@ template <Message T>
 class View {
  public:
   View(const View& other) noexcept : owner_{other.owner_}, chunk_{other.chunk_}, seq_{other.seq_} {
-    if (owner_) owner_->hold(chunk_);
+    if (owner_) owner_->hold_again(chunk_);
   }
-  View(View&& other) noexcept : owner_{std::move(other.owner_)}, chunk_{other.chunk_}, seq_{other.seq_} {}
+  View(View&& other) noexcept : owner_{std::exchange(other.owner_, nullptr)}, chunk_{other.chunk_}, seq_{other.seq_} {}
   View& operator=(View other) noexcept {
     std::swap(owner_, other.owner_);
     std::swap(chunk_, other.chunk_);
@@ -73,12 +74,12 @@ class View {
  private:
   template <Message>
   friend class SubscriptionReader;
-  View(std::shared_ptr<detail::Subscriber> owner, std::uint32_t chunk, std::uint64_t seq)
-      : owner_{std::move(owner)}, chunk_{chunk}, seq_{seq} {
-    owner_->hold(chunk_);
+  // A sample just taken by `owner`.
+  View(detail::Subscriber* owner, std::uint32_t chunk, std::uint64_t seq) : owner_{owner}, chunk_{chunk}, seq_{seq} {
+    owner_->hold_taken(chunk_);
   }
 
-  std::shared_ptr<detail::Subscriber> owner_;
+  detail::Subscriber* owner_;  // kept alive by the chunk this view holds
   std::uint32_t chunk_;
   std::uint64_t seq_;
 };

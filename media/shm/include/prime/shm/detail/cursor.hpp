@@ -54,6 +54,8 @@ class Cursor {
     const auto head = h.head.load();
     const auto back = std::min<std::uint64_t>({history, h.capacity, head});
     next_ = head - back;
+    acked_ = next_;
+    ack_every_ = std::clamp<std::uint64_t>(h.capacity / 8, 1, 16);
     h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
   }
   Cursor(const Cursor&) = delete;
@@ -80,6 +82,7 @@ class Cursor {
       const auto ahead = RingEntry::ahead(entry, next_);
       if (ahead < 0) {
         caught_up();
+        acknowledge();
         return std::nullopt;
       }
       if (ahead == 0) {
@@ -121,10 +124,14 @@ class Cursor {
       out.push_back({index, seq});
     }
     if (seq != next_) {
-      // Read everything published: a subscriber passed over is waited for again.
-      if (RingEntry::ahead(topic_->ring(seq).load(std::memory_order_acquire), seq) < 0) caught_up();
       const auto n = seq - next_;
       advance(seq);
+      // Read everything published: a subscriber passed over is waited for
+      // again, and the publisher learns how far it is.
+      if (RingEntry::ahead(topic_->ring(seq).load(std::memory_order_acquire), seq) < 0) {
+        caught_up();
+        acknowledge();
+      }
       return n;
     }
     auto taken = try_take();  // nothing in order: the single take skips a loss or notes it has caught up
@@ -153,6 +160,18 @@ class Cursor {
 
   void release(std::uint32_t chunk) const noexcept { topic_->chunk(chunk).holders.fetch_and(~bit_); }
 
+  // Tells the publisher how far this subscriber has read, and wakes it if it
+  // waits for that. A reader does so before it waits (for a sample or for
+  // room in its budget), when it finds it has read everything, and every
+  // ack_every_ samples in between.
+  void acknowledge() noexcept {
+    if (acked_ == next_) return;
+    acked_ = next_;
+    auto& h = topic_->header();
+    h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
+    if (next_ >= h.space_wanted.load(std::memory_order_seq_cst)) topic_->wake_publisher();
+  }
+
   [[nodiscard]] std::uint64_t lost() const noexcept { return lost_; }
 
  private:
@@ -162,11 +181,15 @@ class Cursor {
     lost_ += seq - next_;
     advance(seq);
   }
+  // The cursor in shared memory follows in steps (acknowledge): one store
+  // per step, not per sample, on the line the publisher reads to learn
+  // whether it has room. A publisher waiting for this subscriber is woken
+  // at once (space_wanted is on a line of its own, rarely written).
   void advance(std::uint64_t seq) {
     next_ = seq;
-    auto& h = topic_->header();
-    h.subscribers[slot_].cursor.store(seq, std::memory_order_seq_cst);
-    if (seq >= h.space_wanted.load(std::memory_order_seq_cst)) topic_->wake_publisher();
+    if (next_ - acked_ >= ack_every_ ||
+        next_ >= topic_->header().space_wanted.load(std::memory_order_relaxed))
+      acknowledge();
   }
   // A subscriber the publisher stopped waiting for is waited for again once
   // it has read everything.
@@ -179,6 +202,11 @@ class Cursor {
   std::size_t slot_ = kNone;
   std::uint64_t bit_ = 0;
   std::uint64_t next_ = 0;
+  std::uint64_t acked_ = 0;  // the cursor the publisher sees
+  // Samples read between two acknowledgements at most: an eighth of the
+  // ring, up to 16. A reader that stops half-way between two costs a
+  // `block` publisher at most that much of the ring.
+  std::uint64_t ack_every_ = 1;
   std::uint64_t lost_ = 0;
 };
 

@@ -16,40 +16,98 @@ namespace prime::shm::detail {
 // memory (the subscriber's bit) goes when its last view does. The reader
 // never takes a sample while it holds max_held: that budget is what the
 // topic's memory was sized for, so keeping to it is what lets the publisher
-// always find a free chunk. Views own this jointly with the reader.
+// always find a free chunk.
+//
+// It lives while its reader does or any chunk is held (views may outlive
+// the reader): one word counts both, so taking a sample and dropping its
+// view cost one read-modify-write each, on a line no other process touches.
 //
 // Thread-safe for holding and dropping; one thread at a time takes.
 class Subscriber {
  public:
-  Subscriber(std::shared_ptr<Topic> topic, std::size_t history, bool observer)
-      : cursor_{std::move(topic), history, observer},
-        max_held_{observer ? 1 : cursor_.topic()->header().max_held},
-        views_{std::make_unique<std::atomic<std::uint32_t>[]>(cursor_.topic()->header().chunk_count)} {}
+  // For the reader, which calls abandon() when it goes.
+  [[nodiscard]] static Subscriber* create(std::shared_ptr<Topic> topic, std::size_t history, bool observer) {
+    return new Subscriber{std::move(topic), history, observer};
+  }
+  Subscriber(const Subscriber&) = delete;
+  Subscriber& operator=(const Subscriber&) = delete;
+
+  // The reader is gone; the last held chunk's release ends the subscriber.
+  void abandon() noexcept { end_share(kKeeper); }
 
   [[nodiscard]] Cursor& cursor() noexcept { return cursor_; }
   [[nodiscard]] const Topic& topic() const noexcept { return *cursor_.topic(); }
   [[nodiscard]] std::size_t max_held() const noexcept { return max_held_; }
-  [[nodiscard]] std::size_t held() const noexcept { return held_.load(std::memory_order_acquire); }
+  [[nodiscard]] std::size_t held() const noexcept { return refs_.load(std::memory_order_acquire) & kHeldMask; }
   [[nodiscard]] bool at_budget() const noexcept { return held() >= max_held_; }
 
-  void hold(std::uint32_t chunk) noexcept {
-    if (views_[chunk].fetch_add(1, std::memory_order_relaxed) == 0) held_.fetch_add(1, std::memory_order_acq_rel);
+  // The first view of a chunk just taken. No view of it is out: its hold was
+  // released before the publisher could publish it again, so no other thread
+  // touches its count now.
+  void hold_taken(std::uint32_t chunk) noexcept {
+    views_[chunk].store(1, std::memory_order_relaxed);
+    refs_.fetch_add(1, std::memory_order_acq_rel);
   }
+  // A copy of a view: the chunk is held already.
+  void hold_again(std::uint32_t chunk) noexcept { views_[chunk].fetch_add(1, std::memory_order_relaxed); }
+
   void drop(std::uint32_t chunk) noexcept {
-    if (views_[chunk].fetch_sub(1, std::memory_order_acq_rel) != 1) return;
+    // The only view of a chunk (the common case) cannot be copied while it
+    // is destroyed, so seeing a count of 1 is enough to know it is the last.
+    auto& views = views_[chunk];
+    if (views.load(std::memory_order_acquire) == 1)
+      views.store(0, std::memory_order_relaxed);  // before the hold goes: a later take stores 1
+    else if (views.fetch_sub(1, std::memory_order_acq_rel) != 1)
+      return;
     cursor_.release(chunk);
-    if (held_.fetch_sub(1, std::memory_order_acq_rel) == max_held_) released_.ring();
+    auto refs = refs_.load(std::memory_order_relaxed);
+    while (true) {
+      // Taking the reader below its budget while it is there: it may be
+      // waiting for room, so the chunk's share becomes a keeper's until the
+      // waiting reader has been rung.
+      const bool ring = (refs & kHeldMask) == max_held_ && refs > kHeldMask;
+      const auto next = refs - 1 + (ring ? kKeeper : 0);
+      if (!refs_.compare_exchange_weak(refs, next, std::memory_order_acq_rel, std::memory_order_relaxed)) continue;
+      if (!ring) {
+        if (next == 0) delete this;
+        return;
+      }
+      released_.ring();
+      end_share(kKeeper);
+      return;
+    }
   }
 
   // Rung when a view's release takes the reader below its budget.
   [[nodiscard]] Doorbell& released() noexcept { return released_; }
 
  private:
+  // refs_: held chunks in the low half; the reader, and a drop ringing the
+  // reader, one kKeeper each in the high half.
+  static constexpr std::uint64_t kKeeper = 1ull << 32;
+  static constexpr std::uint64_t kHeldMask = kKeeper - 1;
+
+  Subscriber(std::shared_ptr<Topic> topic, std::size_t history, bool observer)
+      : cursor_{std::move(topic), history, observer},
+        max_held_{observer ? 1 : cursor_.topic()->header().max_held},
+        views_{std::make_unique<std::atomic<std::uint32_t>[]>(cursor_.topic()->header().chunk_count)} {}
+  ~Subscriber() = default;
+
+  void end_share(std::uint64_t share) noexcept {
+    if (refs_.fetch_sub(share, std::memory_order_acq_rel) == share) delete this;
+  }
+
   Cursor cursor_;
   const std::size_t max_held_;
   std::unique_ptr<std::atomic<std::uint32_t>[]> views_;
-  std::atomic<std::size_t> held_{0};
+  std::atomic<std::uint64_t> refs_{kKeeper};  // the reader's
   Doorbell released_;  // in this process's memory: the futex works alike
 };
+
+// The reader's hold on its Subscriber.
+struct AbandonSubscriber {
+  void operator()(Subscriber* s) const noexcept { s->abandon(); }
+};
+using SubscriberOwner = std::unique_ptr<Subscriber, AbandonSubscriber>;
 
 }  // namespace prime::shm::detail

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -42,11 +43,13 @@ class Writer {
     if (current != 0) recover();  // the previous publisher died: its loans and half-done publish
     h.block_timeout_ns.store(block_timeout_.count());
     next_ = h.head.load();
+    in_ring_.resize(h.capacity);
+    for (std::uint64_t i = 0; i < h.capacity; ++i) in_ring_[i] = RingEntry::chunk(topic_->ring(i).load());
   }
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
   ~Writer() {
-    if (ready_ != kNoChunk) discard(ready_);
+    while (auto chunk = spare_.pop()) discard(*chunk);
     auto expected = me_;
     topic_->header().publisher.compare_exchange_strong(expected, 0);
   }
@@ -61,7 +64,6 @@ class Writer {
   std::expected<std::uint32_t, Error> loan() {
     auto& h = topic_->header();
     if (static_cast<Overflow>(h.overflow) == Overflow::block) wait_for_room();
-    if (ready_ != kNoChunk) return std::exchange(ready_, kNoChunk);
     for (int pass = 0; pass < 2; ++pass) {
       if (auto i = claim()) return *i;
       if (topic_->reclaim_dead_subscribers() == 0) break;
@@ -106,9 +108,10 @@ class Writer {
   void discard(std::uint32_t chunk) noexcept { topic_->chunk(chunk).holders.fetch_and(~kLoanBit); }
 
   // Publishes loaned chunks of `size` bytes each as the next sequences, in
-  // order, chunk i stamped stamps[i]. Never waits. Every header first, then the ring entries
-  // one after another, then the head and one wake: a subscriber polling the
-  // ring fetches its line once for several samples, not once for each.
+  // order, chunk i stamped stamps[i]. Never waits. As publish() does, for
+  // all at once: every header, the head and one wake, then the ring entries
+  // one after another, so a subscriber polling the ring fetches its line
+  // once for several samples, not once for each.
   void publish_some(std::span<const std::uint32_t> chunks, std::size_t size,
                     std::span<const Clock::time_point> stamps) noexcept {
     auto& h = topic_->header();
@@ -118,27 +121,27 @@ class Writer {
       c.size = size;
       c.stamp = stamps[i].time_since_epoch().count();
       c.seq.store(first + i, std::memory_order_release);
-      c.holders.fetch_xor(kRingBit | kLoanBit);
-    }
-    evicted_.clear();
-    for (std::size_t i = 0; i < chunks.size(); ++i) {
-      auto& entry = topic_->ring(first + i);
-      const auto old = RingEntry::chunk(entry.load(std::memory_order_relaxed));
-      entry.store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
-      if (old != kNoChunk) evicted_.push_back(old);
+      to_ring(c);
     }
     next_ = first + chunks.size();
     h.head.store(next_, std::memory_order_seq_cst);
-    for (const auto old : evicted_) {
-      auto& dropped = topic_->chunk(old);
-      dropped.seq.store(kNotPublished, std::memory_order_relaxed);
-      dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
-    }
+    for (std::size_t i = 0; i < chunks.size(); ++i)
+      if (const auto old = std::exchange(in_ring_[(first + i) % h.capacity], chunks[i]); old != kNoChunk) evict(old);
     wake_subscribers();
+    for (std::size_t i = 0; i < chunks.size(); ++i)
+      topic_->ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     claim_ahead();
   }
 
   // Publishes the loaned `chunk` as the next sequence. Never waits.
+  //
+  // The head goes first (a sleeping subscriber looks at it, and the seq_cst
+  // store orders it before the look for sleepers), then the chunk it pushes
+  // out of the ring is let go, then the ring entry a busy subscriber polls.
+  // That store is the one that waits for a line another CPU reads: it is
+  // last, with no locked instruction after it, so its transfer overlaps the
+  // next loan instead of stalling this publish. A subscriber that sees the
+  // head before the entry finds nothing yet and looks again.
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
     auto& h = topic_->header();
     auto& c = topic_->chunk(chunk);
@@ -146,37 +149,70 @@ class Writer {
     c.size = size;
     c.stamp = stamp.time_since_epoch().count();
     c.seq.store(seq, std::memory_order_release);
-    c.holders.fetch_xor(kRingBit | kLoanBit);  // from the loan to the ring in one step
-    auto& entry = topic_->ring(seq);
-    const auto old = RingEntry::chunk(entry.load(std::memory_order_relaxed));
-    entry.store(RingEntry::pack(seq, chunk), std::memory_order_release);
+    to_ring(c);
     h.head.store(seq + 1, std::memory_order_seq_cst);
-    if (old != kNoChunk) {
-      auto& dropped = topic_->chunk(old);
-      // Released by the fetch_and: a subscriber whose hold lands after it
-      // sees the chunk no longer carries that sequence.
-      dropped.seq.store(kNotPublished, std::memory_order_relaxed);
-      dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
-    }
+    if (const auto old = std::exchange(in_ring_[seq % h.capacity], chunk); old != kNoChunk) evict(old);
     wake_subscribers();
+    topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
     claim_ahead();
   }
 
  private:
-  // Claims the next loan's chunk now, while subscribers read what was just
-  // published, and fetches its lines for writing: the next loan then waits
-  // on no one.
+  // A loaned chunk passes from the loan to the ring. No subscriber holds it
+  // (it was free, or left the ring unheld, when it was loaned), so a plain
+  // store does: a bit a subscriber sets meanwhile is one it takes back at
+  // once, as the chunk does not carry the sequence it looked for. No locked
+  // instruction here, so the previous sample's ring line may still be on
+  // its way while this one is written.
+  static void to_ring(ChunkHeader& c) noexcept { c.holders.store(kRingBit, std::memory_order_release); }
+
+  // Keeps a few chunks claimed ahead of the loans, and their lines on their
+  // way for writing: a loan then writes lines already here, while the
+  // subscribers read what was just published.
   void claim_ahead() noexcept {
-    if (ready_ != kNoChunk) return;
-    if (auto next = claim()) {
-      ready_ = *next;
-      __builtin_prefetch(&topic_->chunk(ready_), 1);
-      __builtin_prefetch(topic_->payload(ready_), 1);
+    while (spare_.size() < kAhead) {
+      const auto next = claim_free();
+      if (!next) break;
+      keep_spare(*next);
     }
+    // The chunk the next sequence pushes out of the ring: its line, last
+    // written by the subscriber that released it, is fetched meanwhile.
+    const auto next_out = in_ring_[next_ % in_ring_.size()];
+    if (next_out != kNoChunk) __builtin_prefetch(&topic_->chunk(next_out), 1);
+  }
+
+  void keep_spare(std::uint32_t chunk) noexcept {
+    spare_.push(chunk);
+    __builtin_prefetch(&topic_->chunk(chunk), 1);
+    __builtin_prefetch(topic_->payload(chunk), 1);
+  }
+
+  // A chunk pushed out of the ring. Released by the read-modify-write: a
+  // subscriber whose hold lands after it sees the chunk no longer carries
+  // that sequence. If no subscriber holds it, it goes from the ring straight
+  // to this publisher's spare loans (one step on a line it has just fetched),
+  // else the last subscriber to let it go frees it.
+  void evict(std::uint32_t old) noexcept {
+    auto& dropped = topic_->chunk(old);
+    dropped.seq.store(kNotPublished, std::memory_order_relaxed);
+    if (!spare_.full()) {
+      auto only_ring = kRingBit;
+      if (dropped.holders.compare_exchange_strong(only_ring, kLoanBit, std::memory_order_acq_rel)) {
+        keep_spare(old);
+        return;
+      }
+    }
+    dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
+  }
+
+  // A chunk now held by this publisher: the spare one kept longest, else a free one.
+  std::optional<std::uint32_t> claim() noexcept {
+    if (auto chunk = spare_.pop()) return chunk;
+    return claim_free();
   }
 
   // A free chunk, now held by this publisher, if there is one.
-  std::optional<std::uint32_t> claim() noexcept {
+  std::optional<std::uint32_t> claim_free() noexcept {
     const auto count = topic_->header().chunk_count;
     for (std::uint64_t tried = 0; tried < count; ++tried) {
       const auto i = static_cast<std::uint32_t>(search_++ % count);
@@ -294,10 +330,33 @@ class Writer {
   std::function<void(Error)> report_;
   std::uint64_t next_ = 0;
   std::uint64_t search_ = 0;
-  std::uint32_t ready_ = kNoChunk;  // claimed ahead for the next loan
+  // Chunks this publisher holds by its loan bit for the next loans, oldest
+  // first: claimed ahead, or taken over as they left the ring. Bounded, so a
+  // publisher that loans one at a time after a batch does not sit on many.
+  class Spares {
+   public:
+    [[nodiscard]] std::size_t size() const noexcept { return count_; }
+    [[nodiscard]] bool full() const noexcept { return count_ == kMax; }
+    void push(std::uint32_t chunk) noexcept { chunks_[(first_ + count_++) % kMax] = chunk; }
+    std::optional<std::uint32_t> pop() noexcept {
+      if (count_ == 0) return std::nullopt;
+      --count_;
+      return chunks_[first_++ % kMax];
+    }
+
+   private:
+    static constexpr std::size_t kMax = 64;
+    std::array<std::uint32_t, kMax> chunks_{};
+    std::size_t first_ = 0;
+    std::size_t count_ = 0;
+  };
+  // Claimed ahead of the loans when the ring gives back none: enough that a
+  // loan's lines have arrived by the time it is written.
+  static constexpr std::size_t kAhead = 4;
+  Spares spare_;
+  std::vector<std::uint32_t> in_ring_;  // the chunk each ring entry names, as this publisher wrote it
   std::uint64_t min_cursor_ = 0;    // the slowest subscriber's cursor when last looked at
   int idle_rings_ = 0;              // rings in a row that found a sleeper's bit but woke no one
-  std::vector<std::uint32_t> evicted_;  // publish_some's scratch: chunks its sequences pushed out of the ring
 };
 
 }  // namespace prime::shm::detail
