@@ -109,9 +109,9 @@ class Writer {
 
   // Publishes loaned chunks of `size` bytes each as the next sequences, in
   // order, chunk i stamped stamps[i]. Never waits. As publish() does, for
-  // all at once: every header, the head and one wake, then the ring entries
-  // one after another, so a subscriber polling the ring fetches its line
-  // once for several samples, not once for each.
+  // all at once: every header, then the ring entries one after another (a
+  // subscriber polling the ring fetches its line once for several samples,
+  // not once for each), then the head and one wake.
   void publish_some(std::span<const std::uint32_t> chunks, std::size_t size,
                     std::span<const Clock::time_point> stamps) noexcept {
     auto& h = topic_->header();
@@ -123,25 +123,23 @@ class Writer {
       c.seq.store(first + i, std::memory_order_release);
       to_ring(c);
     }
+    for (std::size_t i = 0; i < chunks.size(); ++i)
+      topic_->ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     next_ = first + chunks.size();
     h.head.store(next_, std::memory_order_seq_cst);
     for (std::size_t i = 0; i < chunks.size(); ++i)
       if (const auto old = std::exchange(in_ring_[(first + i) % h.capacity], chunks[i]); old != kNoChunk) evict(old);
     wake_subscribers();
-    for (std::size_t i = 0; i < chunks.size(); ++i)
-      topic_->ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     claim_ahead();
   }
 
   // Publishes the loaned `chunk` as the next sequence. Never waits.
   //
-  // The head goes first (a sleeping subscriber looks at it, and the seq_cst
-  // store orders it before the look for sleepers), then the chunk it pushes
-  // out of the ring is let go, then the ring entry a busy subscriber polls.
-  // That store is the one that waits for a line another CPU reads: it is
-  // last, with no locked instruction after it, so its transfer overlaps the
-  // next loan instead of stalling this publish. A subscriber that sees the
-  // head before the entry finds nothing yet and looks again.
+  // The ring entry (what a busy subscriber polls) goes before the head (what
+  // a sleeping one looks at; the seq_cst store orders it before the look for
+  // sleepers), so a subscriber that sees the head finds the entry, and a
+  // publisher killed in between leaves a head no later than the ring (see
+  // recover). Then the chunk the entry pushed out of the ring is let go.
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
     auto& h = topic_->header();
     auto& c = topic_->chunk(chunk);
@@ -150,10 +148,10 @@ class Writer {
     c.stamp = stamp.time_since_epoch().count();
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
+    topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
     h.head.store(seq + 1, std::memory_order_seq_cst);
     if (const auto old = std::exchange(in_ring_[seq % h.capacity], chunk); old != kNoChunk) evict(old);
     wake_subscribers();
-    topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
     claim_ahead();
   }
 
@@ -161,9 +159,7 @@ class Writer {
   // A loaned chunk passes from the loan to the ring. No subscriber holds it
   // (it was free, or left the ring unheld, when it was loaned), so a plain
   // store does: a bit a subscriber sets meanwhile is one it takes back at
-  // once, as the chunk does not carry the sequence it looked for. No locked
-  // instruction here, so the previous sample's ring line may still be on
-  // its way while this one is written.
+  // once, as the chunk does not carry the sequence it looked for.
   static void to_ring(ChunkHeader& c) noexcept { c.holders.store(kRingBit, std::memory_order_release); }
 
   // Keeps a few chunks claimed ahead of the loans, and their lines on their
