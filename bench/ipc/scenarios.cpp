@@ -153,6 +153,13 @@ struct Acks {
 };
 static_assert(std::atomic<std::uint64_t>::is_always_lock_free, "atomics across processes must be lock-free");
 
+// Whether each of the first `readers` has acknowledged `seq` (or a later one).
+bool all_have(const Acks& acks, std::size_t readers, std::uint64_t seq) {
+  for (std::size_t i = 0; i < readers; ++i)
+    if (acks.of[i].seq.load(std::memory_order_acquire) < seq) return false;
+  return true;
+}
+
 shm::TopicQos fan_out_qos() { return {.capacity = 4, .max_message_size = kBytes, .max_subscribers = kMaxFanOut}; }
 
 // Child: subscriber number arg(1) of topic "fan" in domain arg(0).
@@ -183,15 +190,10 @@ void BM_FanOut_Shm(benchmark::State& state) {
     children.wait_ready();
     children.go();
 
-    auto all_have = [&](std::uint64_t seq) {
-      for (std::size_t i = 0; i < subscribers; ++i)
-        if (acks.of[i].seq.load(std::memory_order_acquire) != seq) return false;
-      return true;
-    };
     std::uint64_t seq = 0;
     for (int i = 0; i < ipc::kWarmUpMessages; ++i) {
       send(fan, ++seq);
-      ipc::spin_until(children, [&] { return all_have(seq); });
+      ipc::spin_until(children, [&] { return all_have(acks, subscribers, seq); });
     }
     std::vector<std::uint32_t> samples;
     samples.reserve(static_cast<std::size_t>(state.max_iterations));
@@ -205,7 +207,7 @@ void BM_FanOut_Shm(benchmark::State& state) {
       const auto start = Clock::now();
       send(fan, seq);
       const auto published = Clock::now();
-      ipc::spin_until(children, [&] { return all_have(seq); });
+      ipc::spin_until(children, [&] { return all_have(acks, subscribers, seq); });
       const auto last = Clock::now();
       publish_total += clamp_ns(published - start);
       samples.push_back(clamp_ns(last - start));
@@ -269,8 +271,8 @@ void fan_out_reader(ipc::Child& self) {
 const ipc::ChildEntry kFanOutReader{"Scenario.fan_out_reader", fan_out_reader};
 
 // The parent publishes on "stream" to `readers` reader processes; once every
-// reader has the first sample, `timed(children, publisher, all_have, seq)`
-// runs the timed iterations, where all_have(s) tells whether every reader has
+// reader has the first sample, `timed(children, publisher, have, seq)` runs
+// the timed iterations, where have(s) tells whether every reader has
 // acknowledged s and `seq` is the last sequence published.
 template <class Timed>
 void fan_out_stream(std::size_t readers, prime::Overflow overflow, Timed timed) {
@@ -287,15 +289,11 @@ void fan_out_stream(std::size_t readers, prime::Overflow overflow, Timed timed) 
   children.wait_ready();
   children.go();
   // Every reader has read something: all of them are in the topic's ring.
+  auto have = [&](std::uint64_t seq) { return all_have(acks, readers, seq); };
   std::uint64_t seq = 0;
-  auto all_have = [&](std::uint64_t at) {
-    for (std::size_t i = 0; i < readers; ++i)
-      if (acks.of[i].seq.load(std::memory_order_acquire) < at) return false;
-    return true;
-  };
   send(stream, ++seq);
-  ipc::spin_until(children, [&] { return all_have(seq); });
-  timed(children, stream, all_have, seq);
+  ipc::spin_until(children, [&] { return have(seq); });
+  timed(children, stream, have, seq);
   children.stop();
 }
 
@@ -303,10 +301,10 @@ void fan_out_stream(std::size_t readers, prime::Overflow overflow, Timed timed) 
 // readers share the second CPU, so with n > 1 they take turns on it.
 void BM_FanOutThroughput_Shm(benchmark::State& state) {
   ipc::run(state, [&](std::size_t readers) {
-    fan_out_stream(readers, prime::Overflow::block, [&](ipc::Links& children, auto& stream, auto all_have, std::uint64_t& seq) {
+    fan_out_stream(readers, prime::Overflow::block, [&](ipc::Links& children, auto& stream, auto have, std::uint64_t& seq) {
       auto round = [&] {
         for (std::uint64_t i = 0; i < kFanOutRound; ++i) send(stream, ++seq);
-        ipc::spin_until(children, [&] { return all_have(seq); });
+        ipc::spin_until(children, [&] { return have(seq); });
       };
       round();  // untimed: page faults, cold caches
       const auto start = Clock::now();

@@ -165,9 +165,12 @@ class Writer {
   // Keeps a few chunks claimed ahead of the loans, and their lines on their
   // way for writing: a loan then writes lines already here, while the
   // subscribers read what was just published.
+  // Only a few chunks are looked at for that: when subscribers hold every
+  // chunk the ring has let go, a full search on every publish would find
+  // nothing at a cost that grows with the topic (loan() still searches all).
   void claim_ahead() noexcept {
     while (spare_.size() < kAhead) {
-      const auto next = claim_free();
+      const auto next = claim_free(kAhead);
       if (!next) break;
       keep_spare(*next);
     }
@@ -204,16 +207,19 @@ class Writer {
   // A chunk now held by this publisher: the spare one kept longest, else a free one.
   std::optional<std::uint32_t> claim() noexcept {
     if (auto chunk = spare_.pop()) return chunk;
-    return claim_free();
+    return claim_free(topic_->header().chunk_count);
   }
 
-  // A free chunk, now held by this publisher, if there is one.
-  std::optional<std::uint32_t> claim_free() noexcept {
+  // A free chunk among the next `tries` of the search, now held by this
+  // publisher, if there is one. A held chunk is passed over on a plain load,
+  // without taking its line from the subscriber that holds it.
+  std::optional<std::uint32_t> claim_free(std::uint64_t tries) noexcept {
     const auto count = topic_->header().chunk_count;
-    for (std::uint64_t tried = 0; tried < count; ++tried) {
+    for (std::uint64_t tried = 0; tried < std::min(tries, count); ++tried) {
       const auto i = static_cast<std::uint32_t>(search_++ % count);
+      auto& holders = topic_->chunk(i).holders;
       std::uint64_t free = 0;
-      if (topic_->chunk(i).holders.compare_exchange_strong(free, kLoanBit)) return i;
+      if (holders.load(std::memory_order_relaxed) == 0 && holders.compare_exchange_strong(free, kLoanBit)) return i;
     }
     return std::nullopt;
   }
