@@ -68,10 +68,17 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
       // Each view holds its slot: a batch is at most what the budget has left.
       // Taken in one step (one store of the cursor), then made views.
+      // Room in `out` first: from the take on, nothing may throw.
       const auto room = subscriber_->max_held() - std::min(subscriber_->held(), subscriber_->max_held());
+      out.reserve(out.size() + std::min(max, room));
       taken_.clear();
       const auto n = subscriber_->cursor().take_some(std::min(max, room), taken_);
-      for (const auto& t : taken_) out.push_back(sample(t));
+      subscriber_->hold_taken(taken_);
+      for (const auto& t : taken_) {
+        View<T> view{subscriber_.get(), t.chunk, t.seq, typename View<T>::Held{}};
+        const auto stamp = view.stamp();
+        out.push_back({std::move(view), stamp});
+      }
       if (n > 0) {
         budget_reported_ = false;
         return n;
@@ -140,9 +147,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       if (waited == Waited::stopped) return std::unexpected(stopped());
       if (waited == Waited::timeout) return std::unexpected(Error{Errc::limit_exceeded, budget_message() + " until the deadline"});
     }
-    auto sleep = [&](Clock::time_point until) {
-      data.sleep_until(cursor.bit(), [&] { return cursor.available() || stop.stop_requested(); }, until);
-    };
+    auto sleep = [&](Clock::time_point until) { cursor.sleep_until([&] { return stop.stop_requested(); }, until); };
     const auto waited = prime::detail::spin_then_sleep([&] { return cursor.ready(); }, sleep, spin_, deadline, stop);
     if (waited == Waited::stopped) return std::unexpected(stopped());
     if (waited == Waited::timeout)

@@ -78,6 +78,10 @@ class View {
   View(detail::Subscriber* owner, std::uint32_t chunk, std::uint64_t seq) : owner_{owner}, chunk_{chunk}, seq_{seq} {
     owner_->hold_taken(chunk_);
   }
+  // One of several samples taken together, held already (Subscriber::hold_taken for them all).
+  struct Held {};
+  View(detail::Subscriber* owner, std::uint32_t chunk, std::uint64_t seq, Held) noexcept
+      : owner_{owner}, chunk_{chunk}, seq_{seq} {}
 
   detail::Subscriber* owner_;  // kept alive by the chunk this view holds
   std::uint32_t chunk_;

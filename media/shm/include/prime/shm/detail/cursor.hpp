@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -10,7 +11,10 @@
 #include <vector>
 
 #include "prime/logic/error.hpp"
+#include "prime/logic/sample.hpp"
+#include "prime/shm/detail/asymmetric_fence.hpp"
 #include "prime/shm/detail/layout.hpp"
+#include "prime/shm/detail/prefetch.hpp"
 #include "prime/shm/detail/topic.hpp"
 
 namespace prime::shm::detail {
@@ -56,6 +60,10 @@ class Cursor {
     next_ = head - back;
     acked_ = next_;
     ack_every_ = std::clamp<std::uint64_t>(h.capacity / 8, 1, 16);
+    if (!heavy_fences()) {
+      h.fence_every_publish.store(1, std::memory_order_seq_cst);
+      slices_until_ = Clock::now() + kSlicesFor;
+    }
     h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
   }
   Cursor(const Cursor&) = delete;
@@ -107,23 +115,33 @@ class Cursor {
   // Up to `max` samples, appended to `out`, with one store of the cursor for
   // them all; how many. A sample overwritten before it was taken ends the
   // batch, and the next take skips what was lost.
+  //
+  // In two passes: the ring entries of what is out first, each chunk's
+  // header line fetched for writing and its payload for reading as it is
+  // found, then the holds. So the lines travel from the publisher together,
+  // not one after another, each hold waiting for its own.
   std::size_t take_some(std::size_t max, std::vector<Taken>& out) {
     if (max == 0) return 0;
-    auto seq = next_;
-    for (; seq - next_ < max; ++seq) {
+    const auto first = out.size();
+    for (auto seq = next_; seq - next_ < max; ++seq) {
       const auto entry = topic_->ring(seq).load(std::memory_order_acquire);
       if (RingEntry::ahead(entry, seq) != 0) break;
       const auto index = RingEntry::chunk(entry);
-      auto& chunk = topic_->chunk(index);
+      prefetch_for_write(&topic_->chunk(index));
       __builtin_prefetch(topic_->payload(index));
-      chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
-      if (chunk.seq.load(std::memory_order_seq_cst) != seq) {
-        chunk.holders.fetch_and(~bit_);
-        break;
-      }
       out.push_back({index, seq});
     }
-    if (seq != next_) {
+    for (auto i = first; i < out.size(); ++i) {
+      auto& chunk = topic_->chunk(out[i].chunk);
+      chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
+      if (chunk.seq.load(std::memory_order_seq_cst) != out[i].seq) {
+        chunk.holders.fetch_and(~bit_);
+        out.resize(i);  // later ones are not held yet
+        break;
+      }
+    }
+    if (out.size() != first) {
+      const auto seq = out.back().seq + 1;
       const auto n = seq - next_;
       advance(seq);
       // Read everything published: a subscriber passed over is waited for
@@ -152,10 +170,27 @@ class Cursor {
   [[nodiscard]] bool ready() const noexcept {
     return RingEntry::ahead(topic_->ring(next_).load(std::memory_order_acquire), next_) >= 0;
   }
-  // ...and the head, for a sleeper: the publisher stores it seq_cst before it
-  // looks for sleepers.
+  // ...and the head, for a sleeper: the publisher stores it before it looks
+  // for sleepers (see sleep_until).
   [[nodiscard]] bool available() const noexcept {
     return topic_->header().head.load(std::memory_order_seq_cst) > next_;
+  }
+
+  // Sleeps on the topic's doorbell until a sample is out, `until`, a ring, or
+  // `woken()` (a stop). The publisher orders its head store before its look
+  // for sleepers by a light fence; the heavy half runs here, between raising
+  // this subscriber's bit and its last look at the head. A subscriber that
+  // cannot fence so asked publishers for full fences when it began; a
+  // publish already under way then may not have seen that, so for a while
+  // it sleeps in short slices.
+  template <class Woken>
+  void sleep_until(Woken&& woken, Clock::time_point until) {
+    if (!heavy_fences() && Clock::now() < slices_until_) until = std::min(until, Clock::now() + kSlice);
+    topic_->header().data.sleep_until(
+        bit_, [&] { return available() || woken(); }, until,
+        [] {
+          if (heavy_fences()) heavy_fence();
+        });
   }
 
   void release(std::uint32_t chunk) const noexcept { topic_->chunk(chunk).holders.fetch_and(~bit_); }
@@ -208,6 +243,10 @@ class Cursor {
   // `block` publisher at most that much of the ring.
   std::uint64_t ack_every_ = 1;
   std::uint64_t lost_ = 0;
+  // Without heavy fences: until when sleeps are cut into slices (sleep_until).
+  static constexpr auto kSlice = std::chrono::milliseconds{1};
+  static constexpr auto kSlicesFor = std::chrono::milliseconds{100};
+  Clock::time_point slices_until_{};
 };
 
 }  // namespace prime::shm::detail

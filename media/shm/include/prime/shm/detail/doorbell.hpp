@@ -46,7 +46,7 @@ inline long futex_wake_all(std::atomic<std::uint32_t>& word) {
 // for a system call only when someone may be asleep. A sleeper raises its bit
 // before it checks its condition a last time; the waker changes the condition
 // before it looks at the bits: one of the two always sees the other (both
-// seq_cst). The bits name who sleeps, so a sleeper that died asleep is
+// seq_cst, or an asymmetric fence). The bits name who sleeps, so a sleeper that died asleep is
 // forgotten by clearing its bit: it cannot tax every later ring.
 //
 // Thread-safe; lives in shared memory (plain words, no pointers).
@@ -55,10 +55,13 @@ struct alignas(64) Doorbell {
   std::atomic<std::uint64_t> sleepers{0};
 
   // Sleeps as `bit` until `ready()`, `until` or a ring; returns ready().
-  template <class Ready>
-  bool sleep_until(std::uint64_t bit, Ready&& ready, std::chrono::steady_clock::time_point until) {
+  // `fence` runs between raising the bit and the last look: for a waker that
+  // fences lightly (asymmetric_fence.hpp).
+  template <class Ready, class Fence = decltype([] {})>
+  bool sleep_until(std::uint64_t bit, Ready&& ready, std::chrono::steady_clock::time_point until, Fence&& fence = {}) {
     sleepers.fetch_or(bit, std::memory_order_seq_cst);
     const auto seen = word.load(std::memory_order_seq_cst);
+    fence();
     bool ok = ready();
     if (!ok && std::chrono::steady_clock::now() < until) {
       futex_wait(word, seen, until);

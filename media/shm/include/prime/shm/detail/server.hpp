@@ -17,6 +17,7 @@
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
+#include "prime/shm/detail/prefetch.hpp"
 #include "prime/shm/detail/service.hpp"
 #include "prime/topology/detail/wait.hpp"
 
@@ -102,7 +103,7 @@ class Server {
         const auto cell = w * 64 + static_cast<std::size_t>(std::countr_zero(bit));
         // Fetch the cell's status and request while the bit is taken: the
         // transfers overlap instead of following one another.
-        __builtin_prefetch(&service_->cell(cell).status, 1);
+        prefetch_for_write(&service_->cell(cell).status);
         __builtin_prefetch(service_->request(cell));
         if (h.pending[w].fetch_and(~bit, std::memory_order_acq_rel) & bit) {
           ++start;

@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <span>
 
 #include "prime/shm/detail/cursor.hpp"
 #include "prime/shm/detail/doorbell.hpp"
@@ -47,6 +48,12 @@ class Subscriber {
   void hold_taken(std::uint32_t chunk) noexcept {
     views_[chunk].store(1, std::memory_order_relaxed);
     refs_.fetch_add(1, std::memory_order_acq_rel);
+  }
+  // The first views of chunks just taken together: one read-modify-write
+  // for them all.
+  void hold_taken(std::span<const Taken> taken) noexcept {
+    for (const auto& t : taken) views_[t.chunk].store(1, std::memory_order_relaxed);
+    refs_.fetch_add(taken.size(), std::memory_order_acq_rel);
   }
   // A copy of a view: the chunk is held already.
   void hold_again(std::uint32_t chunk) noexcept { views_[chunk].fetch_add(1, std::memory_order_relaxed); }

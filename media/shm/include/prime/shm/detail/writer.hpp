@@ -17,7 +17,9 @@
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
+#include "prime/shm/detail/asymmetric_fence.hpp"
 #include "prime/shm/detail/layout.hpp"
+#include "prime/shm/detail/prefetch.hpp"
 #include "prime/shm/detail/topic.hpp"
 #include "prime/topology/detail/wait.hpp"
 
@@ -49,6 +51,7 @@ class Writer {
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
   ~Writer() {
+    evict_leaving();
     while (auto chunk = spare_.pop()) discard(*chunk);
     auto expected = me_;
     topic_->header().publisher.compare_exchange_strong(expected, 0);
@@ -116,6 +119,11 @@ class Writer {
                     std::span<const Clock::time_point> stamps) noexcept {
     auto& h = topic_->header();
     const auto first = next_;
+    // The header lines of the chunks these push out of the ring, last
+    // written by the subscribers that released them: fetched together now,
+    // so that each eviction below does not wait for its own.
+    for (std::size_t i = 0; i < chunks.size(); ++i)
+      if (const auto old = in_ring_[(first + i) % h.capacity]; old != kNoChunk) prefetch_for_write(&topic_->chunk(old));
     for (std::size_t i = 0; i < chunks.size(); ++i) {
       auto& c = topic_->chunk(chunks[i]);
       c.size = size;
@@ -126,9 +134,9 @@ class Writer {
     for (std::size_t i = 0; i < chunks.size(); ++i)
       topic_->ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     next_ = first + chunks.size();
-    h.head.store(next_, std::memory_order_seq_cst);
+    store_head(next_);
     for (std::size_t i = 0; i < chunks.size(); ++i)
-      if (const auto old = std::exchange(in_ring_[(first + i) % h.capacity], chunks[i]); old != kNoChunk) evict(old);
+      if (const auto old = std::exchange(in_ring_[(first + i) % h.capacity], chunks[i]); old != kNoChunk) leave(old);
     wake_subscribers();
     claim_ahead();
   }
@@ -136,7 +144,7 @@ class Writer {
   // Publishes the loaned `chunk` as the next sequence. Never waits.
   //
   // The ring entry (what a busy subscriber polls) goes before the head (what
-  // a sleeping one looks at; the seq_cst store orders it before the look for
+  // a sleeping one looks at; store_head orders it before the look for
   // sleepers), so a subscriber that sees the head finds the entry, and a
   // publisher killed in between leaves a head no later than the ring (see
   // recover). Then the chunk the entry pushed out of the ring is let go.
@@ -149,8 +157,8 @@ class Writer {
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
-    h.head.store(seq + 1, std::memory_order_seq_cst);
-    if (const auto old = std::exchange(in_ring_[seq % h.capacity], chunk); old != kNoChunk) evict(old);
+    store_head(seq + 1);
+    if (const auto old = std::exchange(in_ring_[seq % h.capacity], chunk); old != kNoChunk) leave(old);
     wake_subscribers();
     claim_ahead();
   }
@@ -160,16 +168,31 @@ class Writer {
   // (it was free, or left the ring unheld, when it was loaned), so a plain
   // store does: a bit a subscriber sets meanwhile is one it takes back at
   // once, as the chunk does not carry the sequence it looked for.
+  // The head, ordered before the look for sleepers that follows it (in
+  // wake_subscribers): by the light half of an asymmetric fence, so a
+  // publish does not wait for its stores to reach the subscribers' CPU,
+  // unless this process cannot or a subscriber asked for full fences.
+  void store_head(std::uint64_t head) noexcept {
+    auto& h = topic_->header();
+    if (light_ && h.fence_every_publish.load(std::memory_order_relaxed) == 0) {
+      h.head.store(head, std::memory_order_release);
+      light_fence();
+    } else {
+      h.head.store(head, std::memory_order_seq_cst);
+    }
+  }
+
   static void to_ring(ChunkHeader& c) noexcept { c.holders.store(kRingBit, std::memory_order_release); }
 
-  // Keeps a few chunks claimed ahead of the loans, and their lines on their
-  // way for writing: a loan then writes lines already here, while the
+  // Keeps a few chunks claimed ahead of the loans (those leaving the ring
+  // count: they become spares when evicted), and their lines on their way
+  // for writing: a loan then writes lines already here, while the
   // subscribers read what was just published.
   // Only a few chunks are looked at for that: when subscribers hold every
   // chunk the ring has let go, a full search on every publish would find
   // nothing at a cost that grows with the topic (loan() still searches all).
   void claim_ahead() noexcept {
-    while (spare_.size() < kAhead) {
+    while (spare_.size() + leaving_.size() < kAhead) {
       const auto next = claim_free(kAhead);
       if (!next) break;
       keep_spare(*next);
@@ -177,13 +200,29 @@ class Writer {
     // The chunk the next sequence pushes out of the ring: its line, last
     // written by the subscriber that released it, is fetched meanwhile.
     const auto next_out = in_ring_[next_ % in_ring_.size()];
-    if (next_out != kNoChunk) __builtin_prefetch(&topic_->chunk(next_out), 1);
+    if (next_out != kNoChunk) prefetch_for_write(&topic_->chunk(next_out));
   }
 
   void keep_spare(std::uint32_t chunk) noexcept {
     spare_.push(chunk);
-    __builtin_prefetch(&topic_->chunk(chunk), 1);
-    __builtin_prefetch(topic_->payload(chunk), 1);
+    prefetch_for_write(&topic_->chunk(chunk));
+    prefetch_for_write(topic_->payload(chunk));
+  }
+
+  // A chunk pushed out of the ring. Its eviction waits until kLeavingMax have
+  // left (or a loan needs one): an eviction is a read-modify-write, which
+  // waits for every store before it to reach the other CPUs, the ring entry
+  // just stored on the line a subscriber polls among them. So it is one such
+  // wait per kLeavingMax samples, not per sample. Until evicted, a chunk
+  // keeps its sequence and the ring's bit: a subscriber that looked it up in
+  // the ring before it was replaced may still take it, as before.
+  void leave(std::uint32_t old) noexcept {
+    leaving_.push(old);
+    prefetch_for_write(&topic_->chunk(old));
+    if (leaving_.size() == kLeavingMax) evict_leaving();
+  }
+  void evict_leaving() noexcept {
+    while (auto old = leaving_.pop()) evict(*old);
   }
 
   // A chunk pushed out of the ring. Released by the read-modify-write: a
@@ -206,6 +245,7 @@ class Writer {
 
   // A chunk now held by this publisher: the spare one kept longest, else a free one.
   std::optional<std::uint32_t> claim() noexcept {
+    if (spare_.size() == 0) evict_leaving();
     if (auto chunk = spare_.pop()) return chunk;
     return claim_free(topic_->header().chunk_count);
   }
@@ -332,10 +372,10 @@ class Writer {
   std::function<void(Error)> report_;
   std::uint64_t next_ = 0;
   std::uint64_t search_ = 0;
-  // Chunks this publisher holds by its loan bit for the next loans, oldest
-  // first: claimed ahead, or taken over as they left the ring. Bounded, so a
-  // publisher that loans one at a time after a batch does not sit on many.
-  class Spares {
+  const bool light_ = light_fences();
+  // Chunk indices, oldest first, at most kMax.
+  template <std::size_t kMax>
+  class Fifo {
    public:
     [[nodiscard]] std::size_t size() const noexcept { return count_; }
     [[nodiscard]] bool full() const noexcept { return count_ == kMax; }
@@ -347,7 +387,6 @@ class Writer {
     }
 
    private:
-    static constexpr std::size_t kMax = 64;
     std::array<std::uint32_t, kMax> chunks_{};
     std::size_t first_ = 0;
     std::size_t count_ = 0;
@@ -355,7 +394,12 @@ class Writer {
   // Claimed ahead of the loans when the ring gives back none: enough that a
   // loan's lines have arrived by the time it is written.
   static constexpr std::size_t kAhead = 4;
-  Spares spare_;
+  static constexpr std::size_t kLeavingMax = 8;
+  // Chunks this publisher holds by its loan bit for the next loans: claimed
+  // ahead, or taken over as they left the ring. Bounded, so a publisher that
+  // loans one at a time after a batch does not sit on many.
+  Fifo<64> spare_;
+  Fifo<kLeavingMax> leaving_;  // out of the ring, not evicted yet (see leave)
   std::vector<std::uint32_t> in_ring_;  // the chunk each ring entry names, as this publisher wrote it
   std::uint64_t min_cursor_ = 0;    // the slowest subscriber's cursor when last looked at
   int idle_rings_ = 0;              // rings in a row that found a sleeper's bit but woke no one

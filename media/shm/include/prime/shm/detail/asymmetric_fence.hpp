@@ -1,0 +1,50 @@
+#pragma once
+
+#include <linux/membarrier.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <atomic>
+
+namespace prime::shm::detail {
+
+// An asymmetric fence, for a handshake where one side runs on every sample
+// and the other rarely: a publisher stores the head, then looks for sleeping
+// subscribers' bits; a subscriber about to sleep raises its bit, then looks
+// at the head. One of the two must see the other's store. With a full fence
+// on each side, every publish waits for its stores to reach the other CPU
+// (the head's, and the ring entry's before it, on the line a busy
+// subscriber polls): a cache-line transfer per sample. Instead the publisher
+// only keeps the compiler from reordering (light), and the sleeper, before
+// its last look, makes every CPU running a registered process pass a full
+// fence (heavy: membarrier, an interrupt to each, a few microseconds). Either
+// the publisher looked for sleepers before that fence, and its head store
+// has been drained by it, or after it, and sees the bit.
+
+// Whether this process may use the light half: it is registered for the
+// heavy half's interrupts (Linux 4.16). Asked once.
+inline bool light_fences() noexcept {
+  static const bool registered = ::syscall(SYS_membarrier, MEMBARRIER_CMD_REGISTER_GLOBAL_EXPEDITED, 0, 0) == 0;
+  return registered;
+}
+
+// The light half, between the store and the load.
+inline void light_fence() noexcept { std::atomic_signal_fence(std::memory_order_seq_cst); }
+
+// Whether this process may use the heavy half: the kernel offers it and no
+// seccomp filter (a container's) refuses it. Asked once.
+inline bool heavy_fences() noexcept {
+  static const bool offered = [] {
+    const auto commands = ::syscall(SYS_membarrier, MEMBARRIER_CMD_QUERY, 0, 0);
+    return commands > 0 && (commands & MEMBARRIER_CMD_GLOBAL_EXPEDITED) != 0 &&
+           ::syscall(SYS_membarrier, MEMBARRIER_CMD_GLOBAL_EXPEDITED, 0, 0) == 0;
+  }();
+  return offered;
+}
+
+// The heavy half, between the store and the load; only where heavy_fences().
+inline void heavy_fence() noexcept {
+  if (::syscall(SYS_membarrier, MEMBARRIER_CMD_GLOBAL_EXPEDITED, 0, 0) != 0) std::atomic_thread_fence(std::memory_order_seq_cst);
+}
+
+}  // namespace prime::shm::detail
