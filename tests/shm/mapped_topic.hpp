@@ -1,6 +1,9 @@
 #pragma once
 
 #include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <new>
 #include <optional>
 #include <string>
 #include <thread>
@@ -32,6 +35,29 @@ class MappedTopic {
   // Whether the publisher sleeps waiting for room within `timeout`.
   bool the_publisher_sleeps(std::chrono::milliseconds timeout = std::chrono::seconds{10}) const {
     return within(timeout, [&] { return header().space.sleepers.load() != 0; });
+  }
+
+  // Who holds chunk `i` (its holders word: a bit per subscriber slot, the
+  // ring's and the loan's).
+  [[nodiscard]] std::uint64_t holders(std::size_t i) const {
+    const auto& h = header();
+    return std::launder(reinterpret_cast<shm::detail::ChunkHeader*>(segment_->data() + h.chunks_offset + i * h.chunk_stride))
+        ->holders.load();
+  }
+  // How many chunks are held by the ring alone, and how many by anyone else
+  // or anything more.
+  struct Census {
+    std::size_t ring_only = 0;
+    std::size_t other = 0;
+  };
+  [[nodiscard]] Census census() const {
+    Census c;
+    for (std::size_t i = 0; i < header().chunk_count; ++i) {
+      const auto h = holders(i);
+      if (h == shm::detail::kRingBit) ++c.ring_only;
+      else if (h != 0) ++c.other;
+    }
+    return c;
   }
 
   template <class Condition>

@@ -60,6 +60,27 @@ TEST(ShmProcesses, APublisherKilledMidLoanLeavesSubscribersRunningAndARestartedO
   EXPECT_EQ(reader.lost(), 0u);
 }
 
+// A publisher killed with chunks on their way out of the ring (given back
+// several at a time) strands none: its successor's recovery frees them.
+TEST(ShmProcesses, APublisherKilledWhileChunksLeaveTheRingStrandsNone) {
+  const auto domain = unique_domain("killed-leaving");
+  shm::Core core{domain};
+  const shm::TopicQos qos{.capacity = 4};
+  auto reader = core.subscribe<std::uint64_t>("odom", {}, qos).subscribe();
+  PeerProcess first{{"loan_and_hang", domain, "odom", "103", "4"}};
+  ASSERT_TRUE(first.says("loaned"));
+  const MappedTopic mapped{domain, "odom"};
+  EXPECT_GT(mapped.census().other, 0u) << "the loan, at least";
+  first.kill9();
+  {
+    auto second = core.publisher<std::uint64_t>("odom", qos);
+    for (std::uint64_t i = 0; i < 3; ++i) ASSERT_TRUE(second.publish(i));
+  }
+  const auto census = mapped.census();
+  EXPECT_EQ(census.ring_only, 4u);
+  EXPECT_EQ(census.other, 0u) << "no chunk is left held by the dead publisher";
+}
+
 TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleDoesNotStallABlockPublisher) {
   const auto domain = unique_domain("killed-subscriber-block");
   shm::Core core{domain};

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <fstream>
 #include <numeric>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -208,6 +209,33 @@ TEST_F(ShmTest, WhatAReaderHasReadIsAcknowledgedBeforeItWaits) {
   EXPECT_FALSE(errors.try_read()) << "the publisher waited for the reader";
   for (int i = 3; i < 35; ++i) ASSERT_EQ(*reader.try_read()->value, i);
   EXPECT_EQ(reader.lost(), 0u);
+}
+
+// A publisher gives chunks that left the ring back several at a time. One
+// that goes while some are on their way gives them back first: the next
+// publisher finds every chunk but the ring's free, and can publish on while
+// the reader holds its max_held (the topic has no chunk to spare).
+TEST_F(ShmTest, APublisherGoneWhileChunksLeaveTheRingStrandsNone) {
+  const shm::TopicQos qos{.capacity = 4, .max_subscribers = 1, .max_held = 1};
+  auto reader = core.subscribe<int>("strand", {}, qos).subscribe();
+  const MappedTopic mapped{core.domain(), "strand"};
+  for (int publishes : {5, 6, 7, 8, 9}) {
+    {
+      auto first = core.publisher<int>("strand", qos);
+      for (int i = 0; i < publishes; ++i) ASSERT_TRUE(first.publish(i));
+    }
+    const auto census = mapped.census();
+    EXPECT_EQ(census.ring_only, 4u) << "after " << publishes << " publishes";
+    EXPECT_EQ(census.other, 0u) << "after " << publishes << " publishes";
+  }
+  auto second = core.publisher<int>("strand", qos);
+  std::optional<Sample<shm::View<int>>> held;
+  for (int i = 0; i < 100; ++i) {
+    auto sent = second.publish(i);
+    ASSERT_TRUE(sent) << "publish " << i << ": " << sent.error().describe();
+    held.reset();
+    held = reader.try_read();  // one view held across the next publish
+  }
 }
 
 TEST_F(ShmTest, BoundedTypesCarryVariableContent) {
