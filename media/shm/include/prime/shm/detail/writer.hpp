@@ -164,10 +164,6 @@ class Writer {
   }
 
  private:
-  // A loaned chunk passes from the loan to the ring. No subscriber holds it
-  // (it was free, or left the ring unheld, when it was loaned), so a plain
-  // store does: a bit a subscriber sets meanwhile is one it takes back at
-  // once, as the chunk does not carry the sequence it looked for.
   // The head, ordered before the look for sleepers that follows it (in
   // wake_subscribers): by the light half of an asymmetric fence, so a
   // publish does not wait for its stores to reach the subscribers' CPU,
@@ -182,6 +178,10 @@ class Writer {
     }
   }
 
+  // A loaned chunk passes from the loan to the ring. No subscriber holds it
+  // (it was free, or left the ring unheld, when it was loaned), so a plain
+  // store does: a bit a subscriber sets meanwhile is one it takes back at
+  // once, as the chunk does not carry the sequence it looked for.
   static void to_ring(ChunkHeader& c) noexcept { c.holders.store(kRingBit, std::memory_order_release); }
 
   // Keeps a few chunks claimed ahead of the loans (those leaving the ring
