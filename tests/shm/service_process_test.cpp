@@ -107,12 +107,12 @@ TEST(ShmServiceProcesses, ACallerKilledMidCallLeavesNothingStuck) {
     return x;
   }, {.max_clients = 2});
   auto gate = core.chain<std::int64_t, std::int64_t>("gate");
-  auto rate = [&] {
+  auto rate = [&] {  // the best of 10 batches: another test may share the CPUs meanwhile
     double best = 0;
-    for (int b = 0; b < 3; ++b) {
+    for (int b = 0; b < 10; ++b) {
       const auto start = Clock::now();
-      for (std::int64_t i = 0; i < 2000; ++i) EXPECT_EQ(gate(i), i);
-      best = std::max(best, 2000 / std::chrono::duration<double>(Clock::now() - start).count());
+      for (std::int64_t i = 0; i < 1000; ++i) EXPECT_EQ(gate(i), i);
+      best = std::max(best, 1000 / std::chrono::duration<double>(Clock::now() - start).count());
     }
     return best;
   };

@@ -31,20 +31,9 @@ inline bool light_fences() noexcept {
 // The light half, between the store and the load.
 inline void light_fence() noexcept { std::atomic_signal_fence(std::memory_order_seq_cst); }
 
-// Whether this process may use the heavy half: the kernel offers it and no
-// seccomp filter (a container's) refuses it. Asked once.
-inline bool heavy_fences() noexcept {
-  static const bool offered = [] {
-    const auto commands = ::syscall(SYS_membarrier, MEMBARRIER_CMD_QUERY, 0, 0);
-    return commands > 0 && (commands & MEMBARRIER_CMD_GLOBAL_EXPEDITED) != 0 &&
-           ::syscall(SYS_membarrier, MEMBARRIER_CMD_GLOBAL_EXPEDITED, 0, 0) == 0;
-  }();
-  return offered;
-}
-
-// The heavy half, between the store and the load; only where heavy_fences().
-inline void heavy_fence() noexcept {
-  if (::syscall(SYS_membarrier, MEMBARRIER_CMD_GLOBAL_EXPEDITED, 0, 0) != 0) std::atomic_thread_fence(std::memory_order_seq_cst);
-}
+// The heavy half, between the store and the load. False where the system
+// refuses it (a seccomp filter, as a container's may; a kernel before 4.16):
+// the other side must then fence fully.
+inline bool heavy_fence() noexcept { return ::syscall(SYS_membarrier, MEMBARRIER_CMD_GLOBAL_EXPEDITED, 0, 0) == 0; }
 
 }  // namespace prime::shm::detail

@@ -4,6 +4,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <climits>
@@ -55,13 +56,14 @@ struct alignas(64) Doorbell {
   std::atomic<std::uint64_t> sleepers{0};
 
   // Sleeps as `bit` until `ready()`, `until` or a ring; returns ready().
-  // `fence` runs between raising the bit and the last look: for a waker that
-  // fences lightly (asymmetric_fence.hpp).
-  template <class Ready, class Fence = decltype([] {})>
+  // `fence` runs between raising the bit and the last look, for a waker that
+  // fences lightly (asymmetric_fence.hpp); it returns how long the sleep may
+  // last at most (shorter when it could not fence: a ring may be missed).
+  template <class Ready, class Fence = decltype([] { return std::chrono::steady_clock::time_point::max(); })>
   bool sleep_until(std::uint64_t bit, Ready&& ready, std::chrono::steady_clock::time_point until, Fence&& fence = {}) {
     sleepers.fetch_or(bit, std::memory_order_seq_cst);
     const auto seen = word.load(std::memory_order_seq_cst);
-    fence();
+    until = std::min(until, fence());
     bool ok = ready();
     if (!ok && std::chrono::steady_clock::now() < until) {
       futex_wait(word, seen, until);
