@@ -119,11 +119,6 @@ class Writer {
                     std::span<const Clock::time_point> stamps) noexcept {
     auto& h = topic_->header();
     const auto first = next_;
-    // The header lines of the chunks these push out of the ring, last
-    // written by the subscribers that released them: fetched together now,
-    // so that each eviction below does not wait for its own.
-    for (std::size_t i = 0; i < chunks.size(); ++i)
-      if (const auto old = in_ring_[(first + i) % h.capacity]; old != kNoChunk) prefetch_for_write(&topic_->chunk(old));
     for (std::size_t i = 0; i < chunks.size(); ++i) {
       auto& c = topic_->chunk(chunks[i]);
       c.size = size;
@@ -192,6 +187,9 @@ class Writer {
   // chunk the ring has let go, a full search on every publish would find
   // nothing at a cost that grows with the topic (loan() still searches all).
   void claim_ahead() noexcept {
+    // Out of spares: the chunks leaving the ring are evicted now, after the
+    // publish, rather than by the next loan, before it.
+    if (spare_.size() == 0) evict_leaving();
     while (spare_.size() + leaving_.size() < kAhead) {
       const auto next = claim_free(kAhead);
       if (!next) break;
@@ -210,7 +208,7 @@ class Writer {
   }
 
   // A chunk pushed out of the ring. Its eviction waits until kLeavingMax have
-  // left (or a loan needs one): an eviction is a read-modify-write, which
+  // left, or the spares run out: an eviction is a read-modify-write, which
   // waits for every store before it to reach the other CPUs, the ring entry
   // just stored on the line a subscriber polls among them. So it is one such
   // wait per kLeavingMax samples, not per sample. Until evicted, a chunk
