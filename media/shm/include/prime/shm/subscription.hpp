@@ -68,10 +68,11 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
       // Each view holds its slot: a batch is at most what the budget has left.
       // Taken in one step (one store of the cursor), then made views.
-      // Room in `out` first: from the take on, nothing may throw.
+      // Room in `out` and `taken_` first: from the take on, nothing may throw.
       const auto room = subscriber_->max_held() - std::min(subscriber_->held(), subscriber_->max_held());
       out.reserve(out.size() + std::min(max, room));
       taken_.clear();
+      taken_.reserve(std::min(max, room));
       const auto n = subscriber_->cursor().take_some(std::min(max, room), taken_);
       subscriber_->hold_taken(taken_);
       for (const auto& t : taken_) {

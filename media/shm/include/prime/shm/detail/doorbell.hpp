@@ -47,8 +47,9 @@ inline long futex_wake_all(std::atomic<std::uint32_t>& word) {
 // for a system call only when someone may be asleep. A sleeper raises its bit
 // before it checks its condition a last time; the waker changes the condition
 // before it looks at the bits: one of the two always sees the other (both
-// seq_cst, or an asymmetric fence). The bits name who sleeps, so a sleeper that died asleep is
-// forgotten by clearing its bit: it cannot tax every later ring.
+// seq_cst, or an asymmetric fence). The bits name who sleeps, so a sleeper
+// that died asleep is forgotten by clearing its bit: it cannot tax every
+// later ring.
 //
 // Thread-safe; lives in shared memory (plain words, no pointers).
 struct alignas(64) Doorbell {
