@@ -70,7 +70,9 @@ TEST(ShmProcesses, APublisherKilledWhileChunksLeaveTheRingStrandsNone) {
   PeerProcess first{{"loan_and_hang", domain, "odom", "103", "4"}};
   ASSERT_TRUE(first.says("loaned"));
   const MappedTopic mapped{domain, "odom"};
-  EXPECT_GT(mapped.census().other, 0u) << "the loan, at least";
+  const auto at_kill = mapped.census();
+  ASSERT_GT(at_kill.ring_only, 4u) << "chunks out of the ring, not yet given back, when it dies";
+  EXPECT_GT(at_kill.other, 0u) << "the loan, at least";
   first.kill9();
   {
     auto second = core.publisher<std::uint64_t>("odom", qos);
