@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -11,8 +10,6 @@
 #include <vector>
 
 #include "prime/logic/error.hpp"
-#include "prime/logic/sample.hpp"
-#include "prime/shm/detail/asymmetric_fence.hpp"
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/prefetch.hpp"
 #include "prime/shm/detail/topic.hpp"
@@ -60,7 +57,6 @@ class Cursor {
     next_ = head - back;
     acked_ = next_;
     ack_every_ = std::clamp<std::uint64_t>(h.capacity / 8, 1, 16);
-    if (!heavy_fence()) ask_for_full_fences();
     h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
   }
   Cursor(const Cursor&) = delete;
@@ -167,20 +163,10 @@ class Cursor {
   [[nodiscard]] bool ready() const noexcept {
     return RingEntry::ahead(topic_->ring(next_).load(std::memory_order_acquire), next_) >= 0;
   }
-  // ...and the head, for a sleeper: the publisher stores it before it looks
-  // for sleepers (see sleep_until).
+  // ...and the head, for a sleeper: the publisher stores it seq_cst before it
+  // looks for sleepers.
   [[nodiscard]] bool available() const noexcept {
     return topic_->header().head.load(std::memory_order_seq_cst) > next_;
-  }
-
-  // Sleeps on the topic's doorbell until a sample is out, `until`, a ring, or
-  // `woken()` (a stop). The publisher orders its head store before its look
-  // for sleepers by a light fence; the heavy half runs here, between raising
-  // this subscriber's bit and its last look at the head.
-  template <class Woken>
-  void sleep_until(Woken&& woken, Clock::time_point until) {
-    topic_->header().data.sleep_until(
-        bit_, [&] { return available() || woken(); }, until, [&] { return fence_before_sleep(); });
   }
 
   void release(std::uint32_t chunk) const noexcept { topic_->chunk(chunk).holders.fetch_and(~bit_); }
@@ -216,24 +202,6 @@ class Cursor {
         next_ >= topic_->header().space_wanted.load(std::memory_order_relaxed))
       acknowledge();
   }
-  // The heavy half of the fence before a sleep; how long the sleep may last.
-  // A subscriber refused it asks publishers for full fences from then on.
-  // A publish already under way may not have seen that, so for a while it
-  // sleeps in short slices: a publish it missed is seen a slice later.
-  Clock::time_point fence_before_sleep() {
-    if (!full_fences_asked_) {
-      if (heavy_fence()) return Clock::time_point::max();
-      ask_for_full_fences();
-    }
-    const auto now = Clock::now();
-    return now < slices_until_ ? now + kSlice : Clock::time_point::max();
-  }
-  void ask_for_full_fences() {
-    topic_->header().fence_every_publish.store(1, std::memory_order_seq_cst);
-    full_fences_asked_ = true;
-    slices_until_ = Clock::now() + kSlicesFor;
-  }
-
   // A subscriber the publisher stopped waiting for is waited for again once
   // it has read everything.
   void caught_up() {
@@ -251,12 +219,6 @@ class Cursor {
   // `block` publisher at most that much of the ring.
   std::uint64_t ack_every_ = 1;
   std::uint64_t lost_ = 0;
-  // Refused the heavy fence: publishers were asked to fence fully, and
-  // until when sleeps are cut into slices (fence_before_sleep).
-  bool full_fences_asked_ = false;
-  static constexpr auto kSlice = std::chrono::milliseconds{1};
-  static constexpr auto kSlicesFor = std::chrono::milliseconds{100};
-  Clock::time_point slices_until_{};
 };
 
 }  // namespace prime::shm::detail

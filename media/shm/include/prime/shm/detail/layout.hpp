@@ -34,7 +34,7 @@ using ParticipantId = std::uint64_t;
 inline constexpr ParticipantId kReclaiming = ~0ull;  // a slot whose dead owner is being cleared
 
 inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;  // "PRIMESM4"
-inline constexpr std::uint32_t kLayoutVersion = 5;
+inline constexpr std::uint32_t kLayoutVersion = 4;
 // Room for a message type's description (prime::schema_of), for tools.
 inline constexpr std::size_t kSchemaCapacity = 2048;
 // Subscriber slots a topic may offer; one more is kept for tools that observe.
@@ -110,9 +110,6 @@ struct TopicHeader {
 
   alignas(64) std::atomic<ParticipantId> publisher{0};
   std::atomic<std::int64_t> block_timeout_ns{0};  // the current publisher's
-  // Set for good by a subscriber that cannot fence asymmetrically (see
-  // asymmetric_fence.hpp): publishers then fence every head store fully.
-  std::atomic<std::uint32_t> fence_every_publish{0};
   alignas(64) std::atomic<std::uint64_t> head{0};  // sequences published so far
   Doorbell data;   // rung when a sample is published; sleepers are subscriber slots' bits
   Doorbell space;  // rung when the slowest subscriber reaches `space_wanted` (a `block` publisher waits)

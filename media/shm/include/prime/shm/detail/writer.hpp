@@ -17,7 +17,6 @@
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
-#include "prime/shm/detail/asymmetric_fence.hpp"
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/prefetch.hpp"
 #include "prime/shm/detail/topic.hpp"
@@ -129,7 +128,7 @@ class Writer {
     for (std::size_t i = 0; i < chunks.size(); ++i)
       topic_->ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     next_ = first + chunks.size();
-    store_head(next_);
+    h.head.store(next_, std::memory_order_seq_cst);
     for (std::size_t i = 0; i < chunks.size(); ++i)
       if (const auto old = std::exchange(in_ring_[(first + i) % h.capacity], chunks[i]); old != kNoChunk) leave(old);
     wake_subscribers();
@@ -139,7 +138,7 @@ class Writer {
   // Publishes the loaned `chunk` as the next sequence. Never waits.
   //
   // The ring entry (what a busy subscriber polls) goes before the head (what
-  // a sleeping one looks at; store_head orders it before the look for
+  // a sleeping one looks at; the seq_cst store orders it before the look for
   // sleepers), so a subscriber that sees the head finds the entry, and a
   // publisher killed in between leaves a head no later than the ring (see
   // recover). Then the chunk the entry pushed out of the ring is let go.
@@ -152,27 +151,13 @@ class Writer {
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
-    store_head(seq + 1);
+    h.head.store(seq + 1, std::memory_order_seq_cst);
     if (const auto old = std::exchange(in_ring_[seq % h.capacity], chunk); old != kNoChunk) leave(old);
     wake_subscribers();
     claim_ahead();
   }
 
  private:
-  // The head, ordered before the look for sleepers that follows it (in
-  // wake_subscribers): by the light half of an asymmetric fence, so a
-  // publish does not wait for its stores to reach the subscribers' CPU,
-  // unless this process cannot or a subscriber asked for full fences.
-  void store_head(std::uint64_t head) noexcept {
-    auto& h = topic_->header();
-    if (light_ && h.fence_every_publish.load(std::memory_order_relaxed) == 0) {
-      h.head.store(head, std::memory_order_release);
-      light_fence();
-    } else {
-      h.head.store(head, std::memory_order_seq_cst);
-    }
-  }
-
   // A loaned chunk passes from the loan to the ring. No subscriber holds it
   // (it was free, or left the ring unheld, when it was loaned), so a plain
   // store does: a bit a subscriber sets meanwhile is one it takes back at
@@ -370,7 +355,6 @@ class Writer {
   std::function<void(Error)> report_;
   std::uint64_t next_ = 0;
   std::uint64_t search_ = 0;
-  const bool light_ = light_fences();
   // Chunk indices, oldest first, at most kMax.
   template <std::size_t kMax>
   class Fifo {
