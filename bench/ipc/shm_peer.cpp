@@ -12,6 +12,9 @@
 //   Throughput       the child publishes back-to-back on a `block` topic
 //                    kStreamDepth deep (lossless: it waits for the parent);
 //                    the parent busy-polls, one sample per iteration.
+//   ShmLight         Throughput with the publisher's PublishFence::light:
+//                    no full fence per publish (the parent busy-polls, so it
+//                    never needs the membarrier that makes up for it).
 //   ShmBatch         the same in batches: the child loans and publishes up to
 //                    kBatch at once (loan_some), the parent takes every
 //                    sample available, up to kBatch, in one read_some.
@@ -32,9 +35,9 @@ namespace shm = prime::shm;
 using namespace std::chrono_literals;
 
 shm::TopicQos latency_qos(std::size_t bytes) { return {.capacity = 4, .max_message_size = bytes}; }
-shm::TopicQos stream_qos(std::size_t bytes) {
+shm::TopicQos stream_qos(std::size_t bytes, shm::PublishFence fence = shm::PublishFence::full) {
   return {.capacity = ipc::kStreamDepth, .max_message_size = bytes, .overflow = prime::Overflow::block,
-          .block_timeout = 10s, .max_subscribers = 1, .max_held = 4};
+          .block_timeout = 10s, .publish_fence = fence, .max_subscribers = 1, .max_held = 4};
 }
 constexpr std::size_t kBatch = 32;
 shm::TopicQos batch_qos(std::size_t bytes) {
@@ -90,16 +93,18 @@ void echo(ipc::Child& self) {
 const ipc::ChildEntry kEcho{"Shm.echo", echo<false>};
 const ipc::ChildEntry kEchoSleeping{"Shm.echo_sleeping", echo<true>};
 
+template <shm::PublishFence kFence>
 void stream(ipc::Child& self) {
   shm::Core core{self.arg(0)};
-  auto out = core.publisher<shm::Bytes>("stream", stream_qos(self.bytes()));
+  auto out = core.publisher<shm::Bytes>("stream", stream_qos(self.bytes(), kFence));
   self.ready();
   for (std::uint64_t seq = 1;; ++seq) {
     if (seq % 1024 == 0) self.check();
     send(out, self.bytes(), seq);
   }
 }
-const ipc::ChildEntry kStream{"Shm.stream", stream};
+const ipc::ChildEntry kStream{"Shm.stream", stream<shm::PublishFence::full>};
+const ipc::ChildEntry kStreamLight{"Shm.stream_light", stream<shm::PublishFence::light>};
 
 void stream_batches(ipc::Child& self) {
   shm::Core core{self.arg(0)};
@@ -143,12 +148,13 @@ void BM_Latency_ShmSleeping(benchmark::State& state) { latency<true>(state); }
 BENCHMARK(BM_Latency_Shm)->Apply(ipc::latency_payloads);
 BENCHMARK(BM_Latency_ShmSleeping)->Arg(64)->UseRealTime();
 
-void BM_Throughput_Shm(benchmark::State& state) {
+template <shm::PublishFence kFence>
+void throughput(benchmark::State& state) {
   ipc::run(state, [&](std::size_t bytes) {
     const auto domain = ipc::new_shm_domain();
     shm::Core core{domain};
     auto in = core.subscribe<shm::Bytes>("stream", {}, stream_qos(bytes)).subscribe();
-    ipc::Link child{"Shm.stream", bytes, {}, {domain}};
+    ipc::Link child{kFence == shm::PublishFence::light ? "Shm.stream_light" : "Shm.stream", bytes, {}, {domain}};
     child.set_drain([&] {
       while (in.try_read()) {  // one view at a time: the topic lets a subscriber hold 4
       }
@@ -159,7 +165,11 @@ void BM_Throughput_Shm(benchmark::State& state) {
     child.stop();
   });
 }
+
+void BM_Throughput_Shm(benchmark::State& state) { throughput<shm::PublishFence::full>(state); }
+void BM_Throughput_ShmLight(benchmark::State& state) { throughput<shm::PublishFence::light>(state); }
 BENCHMARK(BM_Throughput_Shm)->Apply(ipc::throughput_payloads);
+BENCHMARK(BM_Throughput_ShmLight)->Arg(64)->UseRealTime();
 
 void BM_Throughput_ShmBatch(benchmark::State& state) {
   ipc::run(state, [&](std::size_t bytes) {

@@ -23,11 +23,22 @@
 //   shm_peer call_many <domain> <service> <threads> <calls>      echo: each thread's calls checked, print "ok <n>"
 //   shm_peer call_once <domain> <service> <value>                print "calling", call, print the answer
 //   shm_peer emitter  <domain>                                   serve "emit": publish an Emit on lidar, odom or odom_x
-//   shm_peer echo_asleep <domain> <in> <out> <count>             read count numbers from in asleep (spin 0), each published back on out
+//   shm_peer echo_asleep <domain> <in> <out> <count> [no_membarrier]
+//                     read count numbers from in asleep (spin 0), each published back on out, then print
+//                     "done <heavy fences asked for> <ms>"; with no_membarrier under a seccomp filter that
+//                     refuses membarrier(2), as a container's may
+#include <linux/filter.h>
+#include <linux/seccomp.h>
+#include <sys/prctl.h>
+#include <sys/syscall.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <cstddef>
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -37,6 +48,7 @@
 
 #include "prime/liberty.hpp"
 #include "prime/shm.hpp"
+#include "prime/shm/detail/asymmetric_fence.hpp"
 #include "shm/messages.hpp"
 
 using namespace prime;
@@ -56,6 +68,20 @@ void say(const std::string& line) {
 
 Overflow overflow_of(const std::string& s) { return s == "block" ? Overflow::block : Overflow::drop_oldest; }
 
+// From here on this process's membarrier(2) calls fail with EPERM.
+void refuse_membarrier() {
+  sock_filter filter[] = {
+      BPF_STMT(BPF_LD | BPF_W | BPF_ABS, offsetof(seccomp_data, nr)),
+      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, SYS_membarrier, 0, 1),
+      BPF_STMT(BPF_RET | BPF_K, SECCOMP_RET_ERRNO | EPERM),
+      BPF_STMT(BPF_RET | BPF_K, SECCOMP_RET_ALLOW),
+  };
+  sock_fprog program{static_cast<unsigned short>(sizeof filter / sizeof filter[0]), filter};
+  if (::prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0) != 0 || ::prctl(PR_SET_SECCOMP, SECCOMP_MODE_FILTER, &program) != 0)
+    fail("cannot install a seccomp filter");
+  if (::syscall(SYS_membarrier, 0, 0, 0) != -1 || errno != EPERM) fail("membarrier still allowed");
+}
+
 [[noreturn]] void forever() {
   while (true) std::this_thread::sleep_for(1h);
 }
@@ -65,6 +91,7 @@ Overflow overflow_of(const std::string& s) { return s == "block" ? Overflow::blo
 int main(int argc, char** argv) {
   if (argc < 3) fail("usage: shm_peer <role> <domain> ...");
   const std::string role = argv[1];
+  if (role == "echo_asleep" && argc == 7 && std::string{argv[6]} == "no_membarrier") refuse_membarrier();
   shm::Core core{argv[2], {.participant = "peer-" + role}};
   const std::string topic = argc > 3 ? argv[3] : "";
   auto arg = [&](int i) { return std::strtoull(argv[i], nullptr, 10); };
@@ -103,16 +130,18 @@ int main(int argc, char** argv) {
     say("woken");
     forever();
   }
-  if (role == "echo_asleep" && argc == 6) {
+  if (role == "echo_asleep" && (argc == 6 || argc == 7)) {
     auto in = core.subscribe<std::uint64_t>(topic, {.spin = 0us}).subscribe();
     auto out = core.publisher<std::uint64_t>(argv[4]);
     say("subscribed");
+    const auto start = std::chrono::steady_clock::now();
     for (std::uint64_t i = 0; i < arg(5); ++i) {
       auto got = in.read_for(30s);
       if (!got) fail(got.error().describe() + " waiting for " + std::to_string(i));
       if (auto sent = out.publish(*got->value); !sent) fail(sent.error().describe());
     }
-    say("done");
+    const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - start);
+    say("done " + std::to_string(shm::detail::heavy_fences.load()) + " " + std::to_string(ms.count()));
     return 0;
   }
   if (role == "stuck" && argc == 5) {

@@ -494,7 +494,7 @@ TEST_F(ShmTest, SequencesGoOnAcrossTheRingsTwoToTheFortiethWrap) {
   const shm::TopicQos qos{.capacity = 4, .max_message_size = sizeof(std::uint64_t), .max_subscribers = 8, .max_held = 8};
   auto registry = shm::detail::Registry::join(unique_domain("wrap"), 0600, "test");
   auto topic = shm::detail::Topic::open(registry, "wrapping", Fingerprint::of<std::uint64_t>(), qos, "u64", kWrap - 6);
-  shm::Publisher<std::uint64_t> publisher{topic, 1s, {}};
+  shm::Publisher<std::uint64_t> publisher{topic, 1s, shm::PublishFence::full, {}};
   shm::SubscriptionReader<std::uint64_t> reader{topic, {}, {}};
   for (std::uint64_t i = 0; i < 12; ++i) {
     ASSERT_TRUE(publisher.publish(i));

@@ -70,11 +70,13 @@ const shm::RegistrySnapshot::Service* find_service(const shm::RegistrySnapshot& 
 }
 
 std::string overflow_name(Overflow o) { return o == Overflow::block ? "block" : "drop_oldest"; }
+std::string fence_name(shm::PublishFence f) { return f == shm::PublishFence::light ? "light" : "full"; }
 
 std::string topic_json(const shm::RegistrySnapshot::Topic& t, double rate) {
   return "{\"name\":" + quote(t.name) + ",\"type\":" + quote(t.type) + ",\"capacity\":" + std::to_string(t.qos.capacity) +
          ",\"max_message_size\":" + std::to_string(t.qos.max_message_size) + ",\"overflow\":" +
-         quote(overflow_name(t.qos.overflow)) + ",\"max_subscribers\":" + std::to_string(t.qos.max_subscribers) +
+         quote(overflow_name(t.qos.overflow)) + ",\"publish_fence\":" + quote(fence_name(t.qos.publish_fence)) +
+         ",\"max_subscribers\":" + std::to_string(t.qos.max_subscribers) +
          ",\"max_held\":" + std::to_string(t.qos.max_held) + ",\"publisher_pid\":" + std::to_string(t.publisher_pid) +
          ",\"publisher\":" + quote(t.publisher) + ",\"subscriber_pids\":" + json_pids(t.subscriber_pids) +
          ",\"published\":" + std::to_string(t.published) + ",\"rate\":" + fixed(rate) + ",\"schema\":" + quote(t.schema) + "}";
@@ -223,7 +225,8 @@ int shm_info(const Options& o) {
     }
     std::cout << "topic " << t->name << "\n  type: " << t->type << "\n  capacity: " << t->qos.capacity
               << "\n  max_message_size: " << t->qos.max_message_size << "\n  overflow: " << overflow_name(t->qos.overflow)
-              << "\n  block_timeout: " << t->qos.block_timeout.count() << " ms\n  max_subscribers: " << t->qos.max_subscribers
+              << "\n  block_timeout: " << t->qos.block_timeout.count()
+              << " ms\n  publish_fence: " << fence_name(t->qos.publish_fence) << "\n  max_subscribers: " << t->qos.max_subscribers
               << "\n  max_held: " << t->qos.max_held << "\n  publisher: " << (t->publisher_pid ? t->publisher + " (pid " + std::to_string(t->publisher_pid) + ")" : "none")
               << "\n  subscribers: " << pids(t->subscriber_pids) << "\n  published: " << t->published << "\nfields\n"
               << fields(t->schema);

@@ -126,7 +126,7 @@ class Core : public ErasedChainRuntime {
   template <Message T>
   [[nodiscard]] Publisher<T> publisher(const std::string& name, TopicQos qos = {}) {
     auto topic = open<T>(name, qos, "publisher");
-    return Publisher<T>{std::move(topic), qos.block_timeout, [runtime = runtime()](Error e) {
+    return Publisher<T>{std::move(topic), qos.block_timeout, qos.publish_fence, [runtime = runtime()](Error e) {
                           if (auto r = runtime.lock()) r->report(std::move(e));
                         }};
   }
@@ -266,7 +266,7 @@ class Core : public ErasedChainRuntime {
   [[nodiscard]] Publisher<Bytes> raw_publisher(const std::string& name) {
     auto topic = detail::Topic::inspect(registry_, name);
     if (!topic) throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + domain() + "'"}};
-    return Publisher<Bytes>{std::move(topic), std::chrono::milliseconds{1000}, {}};
+    return Publisher<Bytes>{std::move(topic), std::chrono::milliseconds{1000}, PublishFence::full, {}};
   }
 
   // For tools: a raw-byte handle on service `name`, whatever its types.

@@ -16,6 +16,7 @@
 #include "prime/logic/sample.hpp"
 #include "prime/shm/detail/writer.hpp"
 #include "prime/shm/message.hpp"
+#include "prime/shm/qos.hpp"
 
 namespace prime::shm {
 
@@ -172,9 +173,10 @@ class Batch {
 template <Message T>
 class Publisher {
  public:
-  Publisher(std::shared_ptr<detail::Topic> topic, std::chrono::milliseconds block_timeout,
+  Publisher(std::shared_ptr<detail::Topic> topic, std::chrono::milliseconds block_timeout, PublishFence fence,
             std::function<void(Error)> report)
-      : owner_{std::make_shared<detail::LoaningWriter>(std::move(topic), block_timeout, std::move(report))} {}
+      : owner_{std::make_shared<detail::LoaningWriter>(std::move(topic), block_timeout, fence == PublishFence::light,
+                                                       std::move(report))} {}
   Publisher(Publisher&&) noexcept = default;
   Publisher& operator=(Publisher&& other) noexcept {
     if (this != &other) {

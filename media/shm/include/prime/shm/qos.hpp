@@ -8,6 +8,26 @@
 
 namespace prime::shm {
 
+// How a publish makes sure a subscriber on its way to sleep sees it (the
+// subscriber raises its sleeper bit, then looks at the head; the publisher
+// stores the head, then looks for sleepers: one must see the other).
+enum class PublishFence {
+  // Every publish fences fully: it waits for its stores to reach the
+  // subscribers' CPUs, about one cache-line transfer. That bounds a
+  // busy subscriber's throughput one message at a time (batches share it).
+  full,
+  // A publish only keeps the compiler from reordering. A subscriber of the
+  // topic about to sleep pays instead, with membarrier(2): an interrupt, of
+  // a few microseconds, to every CPU then running a process that publishes
+  // a `light` topic (not only this topic's publisher). Each subscriber runs
+  // at most 1000 a second: one that sleeps more often asks this publisher
+  // for full fences until it sleeps less; so does one the system refuses
+  // membarrier (a container's seccomp filter may), for good. For a
+  // high-rate topic read by busy subscribers, where robot control cores
+  // running light publishers can take the interrupts.
+  light,
+};
+
 // How a topic is laid out and behaves, chosen at run time. Whoever opens the
 // topic first (publisher or subscriber) creates it with these values; anyone
 // who opens it later with others is refused with both named
@@ -28,6 +48,7 @@ struct TopicQos {
   // (it loses what is overwritten before it reads it, counted in its
   // lost()) until it has caught up.
   std::chrono::milliseconds block_timeout{1000};
+  PublishFence publish_fence = PublishFence::full;  // the publisher's (not compared)
   std::size_t max_subscribers = 8;  // subscribers at once (at most 61; one more slot is kept for tools)
   // Samples each subscriber may hold at once (views alive). The topic's
   // memory is sized for it, and each reader keeps to it: past it, a reader

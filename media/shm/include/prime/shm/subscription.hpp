@@ -148,9 +148,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       if (waited == Waited::stopped) return std::unexpected(stopped());
       if (waited == Waited::timeout) return std::unexpected(Error{Errc::limit_exceeded, budget_message() + " until the deadline"});
     }
-    auto sleep = [&](Clock::time_point until) {
-      data.sleep_until(cursor.bit(), [&] { return cursor.available() || stop.stop_requested(); }, until);
-    };
+    auto sleep = [&](Clock::time_point until) { cursor.sleep_until([&] { return stop.stop_requested(); }, until); };
     const auto waited = prime::detail::spin_then_sleep([&] { return cursor.ready(); }, sleep, spin_, deadline, stop);
     if (waited == Waited::stopped) return std::unexpected(stopped());
     if (waited == Waited::timeout)

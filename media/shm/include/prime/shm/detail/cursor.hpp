@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -10,6 +11,8 @@
 #include <vector>
 
 #include "prime/logic/error.hpp"
+#include "prime/logic/sample.hpp"
+#include "prime/shm/detail/asymmetric_fence.hpp"
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/prefetch.hpp"
 #include "prime/shm/detail/topic.hpp"
@@ -57,6 +60,8 @@ class Cursor {
     next_ = head - back;
     acked_ = next_;
     ack_every_ = std::clamp<std::uint64_t>(h.capacity / 8, 1, 16);
+    h.full_fences_wanted.fetch_and(~bit_);
+    if (!heavy_fences_allowed()) ask_for_full_fences(Clock::now());
     h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
   }
   Cursor(const Cursor&) = delete;
@@ -67,6 +72,7 @@ class Cursor {
     // Views own the cursor jointly with the reader, so none is out by now.
     topic_->release_subscriber_holds(slot_);
     slot.lagging.store(0);
+    topic_->header().full_fences_wanted.fetch_and(~bit_);
     slot.owner.store(0);
     topic_->wake_publisher();
   }
@@ -163,10 +169,21 @@ class Cursor {
   [[nodiscard]] bool ready() const noexcept {
     return RingEntry::ahead(topic_->ring(next_).load(std::memory_order_acquire), next_) >= 0;
   }
-  // ...and the head, for a sleeper: the publisher stores it seq_cst before it
-  // looks for sleepers.
+  // ...and the head, for a sleeper: the publisher stores it before it looks
+  // for sleepers (see sleep_until).
   [[nodiscard]] bool available() const noexcept {
     return topic_->header().head.load(std::memory_order_seq_cst) > next_;
+  }
+
+  // Sleeps on the topic's doorbell until a sample is out, `until`, a ring, or
+  // `woken()` (a stop). A publisher orders its head store before its look
+  // for sleepers by a full fence, or by a light one (PublishFence::light):
+  // then the heavy half runs here, between raising this subscriber's bit and
+  // its last look at the head.
+  template <class Woken>
+  void sleep_until(Woken&& woken, Clock::time_point until) {
+    topic_->header().data.sleep_until(
+        bit_, [&] { return available() || woken(); }, until, [&] { return fence_before_sleep(); });
   }
 
   void release(std::uint32_t chunk) const noexcept { topic_->chunk(chunk).holders.fetch_and(~bit_); }
@@ -202,6 +219,43 @@ class Cursor {
         next_ >= topic_->header().space_wanted.load(std::memory_order_relaxed))
       acknowledge();
   }
+  // The heavy half of the fence before a sleep, when the publisher fences
+  // lightly; how long the sleep may last. It interrupts every CPU running a
+  // process that publishes lightly, so a subscriber runs at most
+  // kHeavyPerWindow of them per kWindow: one that sleeps more often than
+  // that asks the publisher for full fences instead (as one refused
+  // membarrier does for good), until it sleeps less again.
+  Clock::time_point fence_before_sleep() {
+    const auto now = Clock::now();
+    if (now >= window_end_) {
+      if (full_fences_asked_ && !refused_ && sleeps_ < kHeavyPerWindow / 2) stop_asking_for_full_fences();
+      window_end_ = now + kWindow;
+      sleeps_ = 0;
+    }
+    ++sleeps_;
+    if (topic_->header().light_publisher.load(std::memory_order_seq_cst) != 0 && !full_fences_asked_) {
+      if (sleeps_ <= kHeavyPerWindow && heavy_fence()) return Clock::time_point::max();
+      ask_for_full_fences(now);
+    }
+    return now < slices_until_ ? now + kSlice : Clock::time_point::max();
+  }
+  // A publish under way may have looked at the bits before this one was
+  // raised, and fenced lightly: one heavy fence covers it. Where the system
+  // refuses that, sleeps are cut into slices for a while instead: a publish
+  // it missed is seen a slice later.
+  void ask_for_full_fences(Clock::time_point now) {
+    topic_->header().full_fences_wanted.fetch_or(bit_, std::memory_order_seq_cst);
+    full_fences_asked_ = true;
+    if (refused_ || !heavy_fence()) {
+      refused_ = true;
+      slices_until_ = now + kSlicesFor;
+    }
+  }
+  void stop_asking_for_full_fences() {
+    topic_->header().full_fences_wanted.fetch_and(~bit_, std::memory_order_seq_cst);
+    full_fences_asked_ = false;
+  }
+
   // A subscriber the publisher stopped waiting for is waited for again once
   // it has read everything.
   void caught_up() {
@@ -219,6 +273,17 @@ class Cursor {
   // `block` publisher at most that much of the ring.
   std::uint64_t ack_every_ = 1;
   std::uint64_t lost_ = 0;
+  // Sleeps in the current window, and whether this subscriber asked for
+  // full fences (for good once membarrier was refused).
+  static constexpr auto kWindow = std::chrono::milliseconds{100};
+  static constexpr std::uint32_t kHeavyPerWindow = 100;
+  Clock::time_point window_end_{};
+  std::uint32_t sleeps_ = 0;
+  bool full_fences_asked_ = false;
+  bool refused_ = false;
+  static constexpr auto kSlice = std::chrono::milliseconds{1};
+  static constexpr auto kSlicesFor = std::chrono::milliseconds{100};
+  Clock::time_point slices_until_{};
 };
 
 }  // namespace prime::shm::detail

@@ -4,6 +4,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <climits>
@@ -46,8 +47,9 @@ inline long futex_wake_all(std::atomic<std::uint32_t>& word) {
 // for a system call only when someone may be asleep. A sleeper raises its bit
 // before it checks its condition a last time; the waker changes the condition
 // before it looks at the bits: one of the two always sees the other (both
-// seq_cst). The bits name who sleeps, so a sleeper that died asleep is
-// forgotten by clearing its bit: it cannot tax every later ring.
+// seq_cst, or an asymmetric fence). The bits name who sleeps, so a sleeper
+// that died asleep is forgotten by clearing its bit: it cannot tax every
+// later ring.
 //
 // Thread-safe; lives in shared memory (plain words, no pointers).
 struct alignas(64) Doorbell {
@@ -55,10 +57,14 @@ struct alignas(64) Doorbell {
   std::atomic<std::uint64_t> sleepers{0};
 
   // Sleeps as `bit` until `ready()`, `until` or a ring; returns ready().
-  template <class Ready>
-  bool sleep_until(std::uint64_t bit, Ready&& ready, std::chrono::steady_clock::time_point until) {
+  // `fence` runs between raising the bit and the last look, for a waker that
+  // fences lightly (asymmetric_fence.hpp); it returns how long the sleep may
+  // last at most (shorter when it could not fence: a ring may be missed).
+  template <class Ready, class Fence = decltype([] { return std::chrono::steady_clock::time_point::max(); })>
+  bool sleep_until(std::uint64_t bit, Ready&& ready, std::chrono::steady_clock::time_point until, Fence&& fence = {}) {
     sleepers.fetch_or(bit, std::memory_order_seq_cst);
     const auto seen = word.load(std::memory_order_seq_cst);
+    until = std::min(until, fence());
     bool ok = ready();
     if (!ok && std::chrono::steady_clock::now() < until) {
       futex_wait(word, seen, until);

@@ -34,7 +34,7 @@ using ParticipantId = std::uint64_t;
 inline constexpr ParticipantId kReclaiming = ~0ull;  // a slot whose dead owner is being cleared
 
 inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;  // "PRIMESM4"
-inline constexpr std::uint32_t kLayoutVersion = 4;
+inline constexpr std::uint32_t kLayoutVersion = 5;
 // Room for a message type's description (prime::schema_of), for tools.
 inline constexpr std::size_t kSchemaCapacity = 2048;
 // Subscriber slots a topic may offer; one more is kept for tools that observe.
@@ -110,6 +110,13 @@ struct TopicHeader {
 
   alignas(64) std::atomic<ParticipantId> publisher{0};
   std::atomic<std::int64_t> block_timeout_ns{0};  // the current publisher's
+  // Set while the publisher fences its head stores lightly (PublishFence::
+  // light, asymmetric_fence.hpp): a subscriber about to sleep must then
+  // fence heavily, or ask for full fences.
+  std::atomic<std::uint32_t> light_publisher{0};
+  // Subscriber slots' bits: those that asked the publisher to fence every
+  // head store fully (refused membarrier, or sleeping too often for it).
+  std::atomic<std::uint64_t> full_fences_wanted{0};
   alignas(64) std::atomic<std::uint64_t> head{0};  // sequences published so far
   Doorbell data;   // rung when a sample is published; sleepers are subscriber slots' bits
   Doorbell space;  // rung when the slowest subscriber reaches `space_wanted` (a `block` publisher waits)

@@ -71,6 +71,7 @@ class Topic {
             .overflow = static_cast<Overflow>(h.overflow),
             .block_timeout = std::chrono::duration_cast<std::chrono::milliseconds>(
                 std::chrono::nanoseconds{h.block_timeout_ns.load(std::memory_order_relaxed)}),
+            .publish_fence = h.light_publisher.load(std::memory_order_relaxed) != 0 ? PublishFence::light : PublishFence::full,
             .max_subscribers = h.max_subscribers,
             .max_held = h.max_held};
   }
@@ -86,6 +87,7 @@ class Topic {
     slot.cursor.store(kNoCursor);
     slot.lagging.store(0);
     header_->data.forget(1ull << i);  // it may have died asleep
+    header_->full_fences_wanted.fetch_and(~(1ull << i));
     slot.owner.store(0);
     wake_publisher();
     return true;

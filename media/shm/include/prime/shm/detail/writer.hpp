@@ -17,6 +17,7 @@
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
+#include "prime/shm/detail/asymmetric_fence.hpp"
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/prefetch.hpp"
 #include "prime/shm/detail/topic.hpp"
@@ -31,8 +32,15 @@ namespace prime::shm::detail {
 class Writer {
  public:
   // `report` hears of each subscriber a `block` publisher stops waiting for.
-  Writer(std::shared_ptr<Topic> topic, std::chrono::nanoseconds block_timeout, std::function<void(Error)> report)
-      : topic_{std::move(topic)}, me_{topic_->registry().me()}, block_timeout_{block_timeout}, report_{std::move(report)} {
+  // `light`: fence head stores lightly where this process can register for
+  // the heavy half (asymmetric_fence.hpp).
+  Writer(std::shared_ptr<Topic> topic, std::chrono::nanoseconds block_timeout, bool light,
+         std::function<void(Error)> report)
+      : topic_{std::move(topic)},
+        me_{topic_->registry().me()},
+        block_timeout_{block_timeout},
+        report_{std::move(report)},
+        light_{light && light_fences()} {
     auto& h = topic_->header();
     auto current = h.publisher.load();
     while (true) {
@@ -43,6 +51,9 @@ class Writer {
     }
     if (current != 0) recover();  // the previous publisher died: its loans and half-done publish
     h.block_timeout_ns.store(block_timeout_.count());
+    // Before any light store: a subscriber that then raises its sleeper bit
+    // and reads this clear is seen by every later look for sleepers.
+    h.light_publisher.store(light_ ? 1 : 0, std::memory_order_seq_cst);
     next_ = h.head.load();
     in_ring_.resize(h.capacity);
     for (std::uint64_t i = 0; i < h.capacity; ++i) in_ring_[i] = RingEntry::chunk(topic_->ring(i).load());
@@ -52,6 +63,8 @@ class Writer {
   ~Writer() {
     evict_leaving();
     while (auto chunk = spare_.pop()) discard(*chunk);
+    // After the last light store, which this seq_cst store makes visible first.
+    topic_->header().light_publisher.store(0, std::memory_order_seq_cst);
     auto expected = me_;
     topic_->header().publisher.compare_exchange_strong(expected, 0);
   }
@@ -128,7 +141,7 @@ class Writer {
     for (std::size_t i = 0; i < chunks.size(); ++i)
       topic_->ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     next_ = first + chunks.size();
-    h.head.store(next_, std::memory_order_seq_cst);
+    store_head(next_);
     for (std::size_t i = 0; i < chunks.size(); ++i)
       if (const auto old = std::exchange(in_ring_[(first + i) % h.capacity], chunks[i]); old != kNoChunk) leave(old);
     wake_subscribers();
@@ -138,7 +151,7 @@ class Writer {
   // Publishes the loaned `chunk` as the next sequence. Never waits.
   //
   // The ring entry (what a busy subscriber polls) goes before the head (what
-  // a sleeping one looks at; the seq_cst store orders it before the look for
+  // a sleeping one looks at; store_head orders it before the look for
   // sleepers), so a subscriber that sees the head finds the entry, and a
   // publisher killed in between leaves a head no later than the ring (see
   // recover). Then the chunk the entry pushed out of the ring is let go.
@@ -151,13 +164,27 @@ class Writer {
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
-    h.head.store(seq + 1, std::memory_order_seq_cst);
+    store_head(seq + 1);
     if (const auto old = std::exchange(in_ring_[seq % h.capacity], chunk); old != kNoChunk) leave(old);
     wake_subscribers();
     claim_ahead();
   }
 
  private:
+  // The head, ordered before the look for sleepers that follows it (in
+  // wake_subscribers): by a full fence, which waits for this publish's
+  // stores to reach the subscribers' CPUs; or, for a light publisher no
+  // subscriber asked for full fences, by the light half of an asymmetric one.
+  void store_head(std::uint64_t head) noexcept {
+    auto& h = topic_->header();
+    if (light_ && h.full_fences_wanted.load(std::memory_order_relaxed) == 0) {
+      h.head.store(head, std::memory_order_release);
+      light_fence();
+    } else {
+      h.head.store(head, std::memory_order_seq_cst);
+    }
+  }
+
   // A loaned chunk passes from the loan to the ring. No subscriber holds it
   // (it was free, or left the ring unheld, when it was loaned), so a plain
   // store does: a bit a subscriber sets meanwhile is one it takes back at
@@ -353,6 +380,7 @@ class Writer {
   ParticipantId me_;
   std::chrono::nanoseconds block_timeout_;
   std::function<void(Error)> report_;
+  const bool light_;
   std::uint64_t next_ = 0;
   std::uint64_t search_ = 0;
   // Chunk indices, oldest first, at most kMax.
