@@ -169,7 +169,7 @@ void throughput(benchmark::State& state) {
 void BM_Throughput_Shm(benchmark::State& state) { throughput<shm::PublishFence::full>(state); }
 void BM_Throughput_ShmLight(benchmark::State& state) { throughput<shm::PublishFence::light>(state); }
 BENCHMARK(BM_Throughput_Shm)->Apply(ipc::throughput_payloads);
-BENCHMARK(BM_Throughput_ShmLight)->Arg(64)->UseRealTime();
+BENCHMARK(BM_Throughput_ShmLight)->Apply(ipc::throughput_payloads);
 
 void BM_Throughput_ShmBatch(benchmark::State& state) {
   ipc::run(state, [&](std::size_t bytes) {

@@ -337,6 +337,9 @@ std::string headline(const Results& r) {
       {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
        {"iceoryx", r.find("Iceoryx", "throughput", 64, "rate")},
        {"Fast DDS", fast_dds("throughput", 64, true)}});
+  row("Shm lossless throughput, publisher's PublishFence::light, 64 B", r.find("ShmLight", "throughput", 64, "rate"), true,
+      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
+       {"Shm with full fences", r.find("Shm", "throughput", 64, "rate")}});
   row("Shm lossless throughput in batches (loan_some / read_some), 64 B", r.find("ShmBatch", "throughput", 64, "rate"), true,
       {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
        {"Shm one at a time", r.find("Shm", "throughput", 64, "rate")}});
