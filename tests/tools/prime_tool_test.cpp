@@ -68,6 +68,7 @@ TEST(PrimeTool, LsAndInfoShowATopicAndAServiceOfRunningPeersWithTypesAndPids) {
   ASSERT_EQ(topics.size(), 1u);
   EXPECT_EQ(text(topics[0], "name"), "tool/ticks");
   EXPECT_EQ(number(topics[0], "publisher_pid"), ticks.pid());
+  EXPECT_EQ(text(topics[0], "publish_fence"), "full");
   EXPECT_GT(number(topics[0], "rate"), 50) << "published at 100 Hz";
   const auto& services = json.object().at("services").array();
   ASSERT_EQ(services.size(), 1u);
@@ -79,6 +80,11 @@ TEST(PrimeTool, LsAndInfoShowATopicAndAServiceOfRunningPeersWithTypesAndPids) {
   EXPECT_NE(info.out.find("request: prime::test::Ask (16 bytes"), std::string::npos) << info.out;
   EXPECT_NE(info.out.find("server: peer-serve (pid " + std::to_string(server.pid()) + ")"), std::string::npos) << info.out;
   EXPECT_NE(info.out.find("  who @0\n  n @8"), std::string::npos) << "its fields, by name: " << info.out;
+
+  shm::Core core{domain};
+  auto fast = core.publisher<int>("tool/fast", {.publish_fence = shm::PublishFence::light});
+  const auto light = prime(domain, {"info", "tool/fast"});
+  EXPECT_NE(light.out.find("\n  publish_fence: light\n"), std::string::npos) << light.out;
 
   const auto missing = prime(domain, {"info", "tool/nothing"});
   EXPECT_EQ(missing.code, 3) << "not found";
