@@ -56,8 +56,11 @@ Echo done(PeerProcess& echo) {
   return {fences, std::strtoull(end, nullptr, 10)};
 }
 
+// The echo answers one round more than `rounds`: the test looks at the
+// topic while the echo still waits for it (once it ends, its subscriber's
+// bits go with it).
 PeerProcess start_echo(const std::string& domain, std::uint64_t rounds, bool no_membarrier = false) {
-  std::vector<std::string> args{"echo_asleep", domain, "ping", "pong", std::to_string(rounds)};
+  std::vector<std::string> args{"echo_asleep", domain, "ping", "pong", std::to_string(rounds + 1)};
   if (no_membarrier) args.emplace_back("no_membarrier");
   return PeerProcess{args};
 }
@@ -72,7 +75,7 @@ TEST(ShmWakes, ASubscriberOnItsWayToSleepIsWokenByAPublishLandingMeanwhile) {
   const MappedTopic mapped{domain, "ping"};
   ASSERT_TRUE(mapped.a_subscriber_sleeps());
   EXPECT_EQ(mapped.header().light_publisher.load(), 0u);
-  ping_pong(ping, pong, 0, kRounds);
+  ping_pong(ping, pong, 0, kRounds + 1);
   // A publisher that fences fully costs its subscribers no membarrier.
   EXPECT_EQ(done(echo).heavy_fences, 0u);
 }
@@ -95,6 +98,7 @@ TEST(ShmWakes, ALightPublisherWakesEverySleeperAndItsSubscribersBoundTheirInterr
   EXPECT_NE(mapped.header().full_fences_wanted.load(), 0u) << "a subscriber sleeping this often asks for full fences";
   ping_pong(ping, pong, kRounds, kSlowRounds, 20ms);
   EXPECT_EQ(mapped.header().full_fences_wanted.load(), 0u) << "sleeping 50 times a second, it stops asking";
+  ping_pong(ping, pong, kRounds + kSlowRounds, 1);
   const auto echoed = done(echo);
   ASSERT_NE(echoed.heavy_fences, ~0ull);
   EXPECT_GT(echoed.heavy_fences, 0u);
@@ -113,6 +117,7 @@ TEST(ShmWakes, ASubscriberRefusedMembarrierHasALightPublisherFenceFullyAndIsWoke
   EXPECT_NE(mapped.header().full_fences_wanted.load(), 0u) << "asked when it subscribed";
   ping_pong(ping, pong, 0, kRounds);
   EXPECT_NE(mapped.header().full_fences_wanted.load(), 0u) << "asked for good";
+  ping_pong(ping, pong, kRounds, 1);
   EXPECT_NE(done(echo).heavy_fences, ~0ull);
 }
 
