@@ -51,7 +51,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     auto taken = subscriber_->cursor().try_take();
     if (!taken) return std::nullopt;
     budget_reported_ = false;
-    return sample(*taken);
+    return sample(View<T>{subscriber_.get(), taken->chunk, taken->seq});
   }
 
   std::expected<Sample<View<T>>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
@@ -75,11 +75,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       taken_.reserve(std::min(max, room));
       const auto n = subscriber_->cursor().take_some(std::min(max, room), taken_);
       subscriber_->hold_taken(taken_);
-      for (const auto& t : taken_) {
-        View<T> view{subscriber_.get(), t.chunk, t.seq, typename View<T>::Held{}};
-        const auto stamp = view.stamp();
-        out.push_back({std::move(view), stamp});
-      }
+      for (const auto& t : taken_) out.push_back(sample(View<T>{subscriber_.get(), t.chunk, t.seq, typename View<T>::Held{}}));
       if (n > 0) {
         budget_reported_ = false;
         return n;
@@ -103,8 +99,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   [[nodiscard]] std::uint64_t lost() const override { return subscriber_->cursor().lost(); }
 
  private:
-  Sample<View<T>> sample(const detail::Taken& taken) {
-    View<T> view{subscriber_.get(), taken.chunk, taken.seq};
+  static Sample<View<T>> sample(View<T> view) {
     const auto stamp = view.stamp();
     return {std::move(view), stamp};
   }
