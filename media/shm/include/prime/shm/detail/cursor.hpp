@@ -60,7 +60,8 @@ class Cursor {
     next_ = head - back;
     acked_ = next_;
     ack_every_ = std::clamp<std::uint64_t>(h.capacity / 8, 1, 16);
-    h.full_fences_wanted.fetch_and(~bit_);
+    // The slot's bit in full_fences_wanted is clear: whoever freed the slot
+    // (the destructor, or reclaim_subscriber) cleared it.
     if (!heavy_fences_allowed()) ask_for_full_fences(Clock::now());
     h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
   }
