@@ -1,6 +1,10 @@
 // Reaching the server: URLs, AUTH, Unix sockets, domains, and what an
 // unreachable server looks like.
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <string>
@@ -30,6 +34,37 @@ TEST_F(OptimusCore, AnUnreachableServerIsAnErrorNamingTheUrlNotAHang) {
   const auto t0 = std::chrono::steady_clock::now();
   EXPECT_TRUE(fails_with([&] { optimus::Core core{url}; }, Errc::unreachable, url));
   EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
+}
+
+// A peer that closes the connection: the first write after that brings back
+// a reset, the next fails with EPIPE, and would raise SIGPIPE, which ends a
+// process that does not handle it. It must be an error, and nothing else.
+TEST(OptimusConnection, WritingToAPeerThatHasGoneIsAnErrorNotASignal) {
+  const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(listener, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof address;
+  ASSERT_EQ(::bind(listener, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+  ASSERT_EQ(::listen(listener, 1), 0);
+  ASSERT_EQ(::getsockname(listener, reinterpret_cast<sockaddr*>(&address), &length), 0);
+  const auto url = "tcp://127.0.0.1:" + std::to_string(ntohs(address.sin_port));
+  auto connection = optimus::detail::Connection::open(optimus::Options{.url = url},
+                                                      *optimus::detail::parse_url(url));
+  ASSERT_TRUE(connection) << connection.error().describe();
+  ::close(::accept(listener, nullptr, nullptr));  // the peer goes
+  ::close(listener);
+  bool failed = false;
+  for (int i = 0; i < 3 && !failed; ++i) {
+    connection->append({"PING"});
+    failed = !connection->flush();
+  }
+  EXPECT_TRUE(failed) << "a write to a closed peer fails";
+  const auto reply = connection->reply();
+  ASSERT_FALSE(reply);
+  EXPECT_EQ(reply.error().code, Errc::unreachable);
+  EXPECT_NE(reply.error().message.find(url), std::string::npos) << reply.error().message;
 }
 
 TEST_F(OptimusCore, ConnectsOverAUnixSocket) {

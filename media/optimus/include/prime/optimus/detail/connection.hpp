@@ -1,17 +1,21 @@
 #pragma once
 
 #include <hiredis/hiredis.h>
+#include <pthread.h>
 #include <sys/socket.h>
 #include <sys/time.h>
 
-#include <charconv>
 #include <cerrno>
+#include <charconv>
 #include <chrono>
+#include <csignal>
 #include <cstring>
+#include <ctime>
 #include <expected>
 #include <initializer_list>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <stop_token>
 #include <span>
 #include <string>
@@ -70,6 +74,40 @@ inline timeval to_timeval(std::chrono::microseconds d) {
   return timeval{static_cast<time_t>(d.count() / 1'000'000), static_cast<suseconds_t>(d.count() % 1'000'000)};
 }
 
+// A write on a socket whose peer has gone (a server killed, a connection shut
+// down by a stop) raises SIGPIPE, which ends the process unless handled, and
+// hiredis writes with write(2), which cannot be told not to. So while one of
+// these lives, SIGPIPE is blocked in this thread, and one a write raised is
+// taken back when it ends: the write fails with EPIPE, which the connection
+// reports as an error like any other.
+class NoSigpipe {
+ public:
+  NoSigpipe() noexcept {
+    sigemptyset(&pipe_);
+    sigaddset(&pipe_, SIGPIPE);
+    sigset_t pending;
+    sigpending(&pending);
+    already_pending_ = sigismember(&pending, SIGPIPE) == 1;  // not ours to take
+    pthread_sigmask(SIG_BLOCK, &pipe_, &before_);
+  }
+  NoSigpipe(const NoSigpipe&) = delete;
+  NoSigpipe& operator=(const NoSigpipe&) = delete;
+  ~NoSigpipe() {
+    if (!already_pending_) {
+      sigset_t pending;
+      sigpending(&pending);
+      const timespec now{};
+      if (sigismember(&pending, SIGPIPE) == 1) sigtimedwait(&pipe_, nullptr, &now);
+    }
+    pthread_sigmask(SIG_SETMASK, &before_, nullptr);
+  }
+
+ private:
+  sigset_t pipe_{};
+  sigset_t before_{};
+  bool already_pending_ = false;
+};
+
 // A command's words. Views: the strings must outlive the call.
 using Args = std::initializer_list<std::string_view>;
 
@@ -123,6 +161,7 @@ class Connection {
     if (redisAppendCommandArgv(ctx_.get(), static_cast<int>(argv_.size()), argv_.data(), lens_.data()) != REDIS_OK)
       broken_ = true;
     ++pending_;
+    unsent_ = true;
   }
   void append(Args args) { append(std::span<const std::string_view>{args.begin(), args.size()}); }
 
@@ -132,6 +171,8 @@ class Connection {
     if (pending_ > 0) --pending_;
     if (broken_) return std::unexpected(io_error());
     void* raw = nullptr;
+    std::optional<NoSigpipe> writing;  // redisGetReply sends what is queued first
+    if (std::exchange(unsent_, false)) writing.emplace();
     if (redisGetReply(ctx_.get(), &raw) != REDIS_OK || raw == nullptr) {
       broken_ = true;
       return std::unexpected(io_error());
@@ -148,6 +189,8 @@ class Connection {
   // Sends what is queued, without reading anything back.
   bool flush() {
     if (broken_) return false;
+    unsent_ = false;
+    const NoSigpipe writing;
     int done = 0;
     while (!done) {
       if (redisBufferWrite(ctx_.get(), &done) != REDIS_OK) {
@@ -175,6 +218,8 @@ class Connection {
   // shut down, never closed, so the owner's descriptor stays valid until it
   // drops this connection. Thread-safe.
   void interrupt() const noexcept { ::shutdown(ctx_->fd, SHUT_RDWR); }
+  // Marks it broken (in its owner's thread), so it is dropped, not reused.
+  void break_off() noexcept { broken_ = true; }
 
  private:
   Connection(std::unique_ptr<redisContext, ContextDeleter> ctx, std::string url)
@@ -190,6 +235,7 @@ class Connection {
   std::string url_;
   std::chrono::microseconds timeout_{-1};
   bool broken_ = false;
+  bool unsent_ = false;  // commands appended since the last send
   int pending_ = 0;
   std::vector<const char*> argv_;
   std::vector<std::size_t> lens_;
@@ -212,9 +258,12 @@ class StopGuard {
     blocking_ = true;
     return true;
   }
+  // After it. A connection a stop shut down is broken from then on, even if
+  // the read got its reply before the shutdown: it is never used again.
   void end_blocking() {
     std::scoped_lock lock{mutex_};
     blocking_ = false;
+    if (interrupted_) connection_.break_off();
   }
   [[nodiscard]] bool stopping() {
     std::scoped_lock lock{mutex_};
@@ -227,7 +276,9 @@ class StopGuard {
     void operator()() const noexcept {
       std::scoped_lock lock{guard->mutex_};
       guard->stopping_ = true;
-      if (guard->blocking_) guard->connection_.interrupt();
+      if (!guard->blocking_) return;
+      guard->connection_.interrupt();
+      guard->interrupted_ = true;
     }
   };
 
@@ -235,6 +286,7 @@ class StopGuard {
   std::mutex mutex_;
   bool blocking_ = false;
   bool stopping_ = false;
+  bool interrupted_ = false;
   std::stop_callback<Wake> callback_;  // last: registered once the rest exists
 };
 
