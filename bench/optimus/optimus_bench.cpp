@@ -13,7 +13,7 @@
 //   BM_Optimus_SourceThroughput  batches published and read back by a reader
 //   BM_RedisBenchmark_XaddPipelined  the server's own tool, `redis-benchmark
 //                                -P 64` (50 clients), appending entries like
-//                                Prime's (n, t, d of the same size), untrimmed:
+//                                Prime's (t, d of the same size), untrimmed:
 //                                the most XADDs this server takes, the peer of
 //                                PublishPipelined (which also trims its stream)
 //
@@ -228,8 +228,8 @@ std::expected<double, std::string> redis_benchmark(const std::string& args) {
 void BM_RedisBenchmark_XaddPipelined(benchmark::State& state) {
   const auto pipeline = state.range(0);
   constexpr int kRequests = 100000;
-  // An entry as Prime writes one for an Imu: n, a stamp, the encoded value.
-  const std::string entry = "n 1 t 1000000000000 d " + std::string(57, 'x');
+  // An entry as Prime writes one for an Imu: a stamp, the encoded value.
+  const std::string entry = "t 1000000000000 d " + std::string(57, 'x');
   const std::string args = "-P " + std::to_string(pipeline) + " -n " + std::to_string(kRequests) +
                            " XADD bench-xadd '*' " + entry;
   for (auto _ : state) {

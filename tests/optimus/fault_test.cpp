@@ -7,6 +7,7 @@
 #include <chrono>
 #include <map>
 #include <mutex>
+#include <span>
 #include <thread>
 #include <vector>
 
@@ -89,6 +90,35 @@ TEST_F(OptimusFault, ASourceAndItsReaderCarryOnAfterARestart) {
   auto value = reader.read_for(5s);
   ASSERT_TRUE(value) << value.error().describe();
   EXPECT_EQ(value->value, 3) << "the reader follows the stream begun anew";
+}
+
+// The writer's batches append in the stream's epoch, numbered by the
+// server. A restart without persistence loses the stream: the next batch
+// begins it again in a later epoch, so the reader, whose cursor is in the
+// old one, reads every new value, and counts none lost.
+TEST_F(OptimusFault, BatchesBeginTheStreamAgainAfterARestartAndTheReaderFollows) {
+  RedisServer redis;
+  optimus::Core core{optimus::Options{.url = redis.url(), .domain = domain}};
+  auto pub = core.publisher<int>("imu", {.capacity = 1000});
+  auto reader = pub.source().subscribe({.capacity = 1000});
+  std::vector<Sample<int>> batch;
+  for (int i = 0; i < 200; ++i) batch.push_back({i, Clock::now()});
+  ASSERT_TRUE(pub.publish_all(std::span{batch}.first(100)));
+  ASSERT_EQ(reader.read_all().size(), 100u);
+
+  redis.kill();
+  redis.start();
+  ASSERT_TRUE(eventually([&] { return pub.publish_all(std::span{batch}.last(100)).has_value(); }, 10s));
+  std::vector<int> got;
+  ASSERT_TRUE(eventually(
+      [&] {
+        for (auto& s : reader.read_all()) got.push_back(s.value);
+        return got.size() >= 100;
+      },
+      10s));
+  ASSERT_EQ(got.size(), 100u);
+  for (int i = 0; i < 100; ++i) EXPECT_EQ(got[static_cast<std::size_t>(i)], 100 + i);
+  EXPECT_EQ(reader.lost(), 0u);
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <functional>
 #include <span>
 #include <string>
 #include <thread>
@@ -87,20 +88,87 @@ TEST_F(OptimusSource, BatchesContinueTheSequenceTrimTheStreamAndCountWhatTrimmin
   EXPECT_EQ(reader.lost(), 200u) << "and a single publish goes on from the batch";
 }
 
-TEST_F(OptimusSource, ABatchSurvivesTheServerForgettingItsScriptAndAppendsEachValueOnce) {
+// The server numbers appends within the stream's epoch, so writers' batches
+// interleave into one gapless sequence: a reader loses nothing, and sees
+// each writer's values in its order.
+TEST_F(OptimusSource, TwoWritersBatchesShareOneGaplessSequence) {
+  optimus::Core first{options()};
+  optimus::Core second{options()};
+  const Qos qos{.capacity = 1000};
+  auto one = first.publisher<int>("imu", qos);
+  auto two = second.publisher<int>("imu", qos);
+  auto reader = one.source().subscribe(qos);
+  auto write = [](optimus::Publisher<int>& pub, int writer) {
+    for (int b = 0; b < 10; ++b) {
+      std::vector<Sample<int>> batch;
+      for (int i = 0; i < 50; ++i) batch.push_back({writer * 1000 + b * 50 + i, Clock::now()});
+      ASSERT_TRUE(pub.publish_all(batch));
+    }
+  };
+  {
+    std::jthread a{write, std::ref(one), 1};
+    std::jthread b{write, std::ref(two), 2};
+  }
+  auto all = reader.read_all();
+  ASSERT_EQ(all.size(), 1000u);
+  int next[3] = {0, 1000, 2000};
+  for (const auto& s : all) {
+    const int writer = s.value / 1000;
+    ASSERT_TRUE(writer == 1 || writer == 2) << s.value;
+    EXPECT_EQ(s.value, next[writer]++) << "each writer's values in its order";
+  }
+  EXPECT_EQ(reader.lost(), 0u) << "no gap in the sequence";
+}
+
+// A stream deleted between two batches (as a server restart without
+// persistence loses it) begins again in a later epoch: the reader's cursor
+// comes before every new entry, so it reads them all.
+TEST_F(OptimusSource, ABatchAfterItsStreamWasDeletedBeginsItAgainAndTheReaderFollows) {
   optimus::Core core{options()};
-  auto pub = core.publisher<int>("imu", {.capacity = 2000});
-  auto reader = pub.source().subscribe({.capacity = 2000});
+  auto pub = core.publisher<int>("imu", {.capacity = 1000});
+  auto reader = pub.source().subscribe({.capacity = 1000});
   RawRedis raw{shared_redis().url()};
   std::vector<Sample<int>> batch;
   for (int i = 0; i < 600; ++i) batch.push_back({i, Clock::now()});
   ASSERT_TRUE(pub.publish_all(std::span{batch}.first(300)));
-  raw.command({"SCRIPT", "FLUSH"});  // as a restarted server would have
+  ASSERT_EQ(reader.read_all().size(), 300u);
+  const auto old_epoch = raw.command({"XREVRANGE", pub.source().key(), "+", "-", "COUNT", "1"});
+  ASSERT_EQ(old_epoch->elements, 1u);
+  const std::string old_id{optimus::detail::text(*old_epoch->element[0]->element[0])};
+  ASSERT_EQ(raw.integer({"DEL", pub.source().key()}), 1);
   ASSERT_TRUE(pub.publish_all(std::span{batch}.last(300)));
   auto all = reader.read_all();
-  ASSERT_EQ(all.size(), 600u);
-  for (int i = 0; i < 600; ++i) ASSERT_EQ(all[static_cast<std::size_t>(i)].value, i);
+  ASSERT_EQ(all.size(), 300u);
+  for (int i = 0; i < 300; ++i) ASSERT_EQ(all[static_cast<std::size_t>(i)].value, 300 + i);
   EXPECT_EQ(reader.lost(), 0u);
+  const auto first = raw.command({"XRANGE", pub.source().key(), "-", "+", "COUNT", "1"});
+  const auto old_id_parts = optimus::detail::entry_id(old_id);
+  const auto new_id = optimus::detail::entry_id(optimus::detail::text(*first->element[0]->element[0]));
+  ASSERT_TRUE(old_id_parts && new_id);
+  EXPECT_GT(new_id->epoch, old_id_parts->epoch) << "a later epoch";
+  EXPECT_EQ(new_id->seq, 1u) << "numbered from the start";
+}
+
+// An entry not Prime's (appended with "*", so in a later epoch) does not
+// stop a writer: its batches go on after it, in its epoch.
+TEST_F(OptimusSource, BatchesGoOnAfterAnEntryNotPrimes) {
+  optimus::Core core{options()};
+  auto errors = core.errors().subscribe();
+  auto pub = core.publisher<int>("imu", {.capacity = 100});
+  auto reader = pub.source().subscribe({.capacity = 100});
+  RawRedis raw{shared_redis().url()};
+  std::vector<Sample<int>> batch;
+  for (int i = 0; i < 20; ++i) batch.push_back({i, Clock::now()});
+  ASSERT_TRUE(pub.publish_all(std::span{batch}.first(10)));
+  raw.command({"XADD", pub.source().key(), "*", "hello", "world"});
+  ASSERT_TRUE(pub.publish_all(std::span{batch}.last(10)));
+  auto all = reader.read_all();
+  ASSERT_EQ(all.size(), 20u);
+  for (int i = 0; i < 20; ++i) ASSERT_EQ(all[static_cast<std::size_t>(i)].value, i);
+  EXPECT_EQ(reader.lost(), 1u) << "the entry skipped, and only it";
+  auto error = errors.read_for(2s);
+  ASSERT_TRUE(error);
+  EXPECT_NE(error->value.message.find("not a Prime entry"), std::string::npos) << error->value.message;
 }
 
 TEST_F(OptimusSource, AForeignEntryInTheStreamIsReportedAndSkipped) {

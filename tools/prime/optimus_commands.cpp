@@ -195,7 +195,9 @@ int optimus_watch(const Options& o, const std::string& command) {
         const auto data = fields["d"];
         if (command == "echo") {
           const std::span<const std::byte> bytes{reinterpret_cast<const std::byte*>(data.data()), data.size()};
-          std::cout << "sequence: " << fields["n"] << "\nstamp: " << fields["t"] << " ns\nsize: " << data.size()
+          // The entry's id is "<epoch>-<k>": its sequence number is k + 1 (stream_protocol.hpp).
+          const auto k = last.substr(last.find('-') + 1);
+          std::cout << "sequence: " << std::stoull(k) + 1 << "\nstamp: " << fields["t"] << " ns\nsize: " << data.size()
                     << "\nbytes: " << hex(bytes) << "\n---" << std::endl;
         } else if (command == "hz") {
           if (previous) values.add(std::chrono::duration<double>(now - *previous).count());

@@ -150,16 +150,18 @@ class Connection {
     return true;
   }
 
-  // Queues a command; nothing is sent until a reply is asked for.
+  // Queues a command; nothing is sent until a reply is asked for. Written
+  // out here (an array of bulk strings): hiredis's own formatting of an
+  // argument vector costs more than the server's append of a stream entry.
   void append(std::span<const std::string_view> args) {
-    argv_.clear();
-    lens_.clear();
-    for (auto a : args) {
-      argv_.push_back(a.data());
-      lens_.push_back(a.size());
+    command_.clear();
+    put_length('*', args.size());
+    for (const auto a : args) {
+      put_length('$', a.size());
+      command_.append(a);
+      command_.append("\r\n");
     }
-    if (redisAppendCommandArgv(ctx_.get(), static_cast<int>(argv_.size()), argv_.data(), lens_.data()) != REDIS_OK)
-      broken_ = true;
+    if (redisAppendFormattedCommand(ctx_.get(), command_.data(), command_.size()) != REDIS_OK) broken_ = true;
     ++pending_;
     unsent_ = true;
   }
@@ -225,6 +227,16 @@ class Connection {
   Connection(std::unique_ptr<redisContext, ContextDeleter> ctx, std::string url)
       : ctx_{std::move(ctx)}, url_{std::move(url)} {}
 
+  // A RESP header: `kind` (* for an array, $ for a bulk string) and a count.
+  void put_length(char kind, std::size_t n) {
+    char digits[24];
+    digits[0] = kind;
+    const auto end = std::to_chars(digits + 1, digits + sizeof digits - 2, n).ptr;
+    end[0] = '\r';
+    end[1] = '\n';
+    command_.append(digits, static_cast<std::size_t>(end + 2 - digits));
+  }
+
   Error io_error() const {
     std::string why = ctx_->err ? std::string{ctx_->errstr} : "connection lost";
     if (ctx_->err == REDIS_ERR_IO && (errno == EAGAIN || errno == EWOULDBLOCK)) why = "no answer in time";
@@ -237,8 +249,7 @@ class Connection {
   bool broken_ = false;
   bool unsent_ = false;  // commands appended since the last send
   int pending_ = 0;
-  std::vector<const char*> argv_;
-  std::vector<std::size_t> lens_;
+  std::string command_;  // the one append() writes out, kept for its capacity
 };
 
 // Lets a stop request end a blocking read on a connection at once, and only

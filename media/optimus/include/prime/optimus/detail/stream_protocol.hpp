@@ -15,18 +15,25 @@
 #include "prime/optimus/detail/connection.hpp"
 
 // How a source lives on the server, as its writers and readers agree on it:
-// the script that appends, the fields of an entry, and what a reader keeps in
-// the source's readers hash. The writing side is stream_writer.hpp, the
-// reading side stream_reader.hpp.
+// the ids and fields of an entry, the script that appends one at a time, and
+// what a reader keeps in the source's readers hash. The writing side is
+// stream_writer.hpp, the reading side stream_reader.hpp.
+//
+// An entry's id is "<epoch>-<k>": the epoch is the server's time (ms) when
+// the stream began, and every writer appends with "<epoch>-*", so the server
+// numbers entries 0, 1, 2 … atomically across writers. The entry's sequence
+// number is k + 1; a reader counts what trimming took from it by the gaps.
+// A stream that begins again (deleted, or lost in a restart without
+// persistence) gets a new, later epoch: a reader's cursor in the old one
+// still comes before every new entry, and the reader sees the epoch change.
+// Fields: t the sensor stamp (steady clock, ns), d the encoded message, and
+// x, for a `block` source, the readers the entry was dropped for (",id,id,")
+// because they made no room in time.
 
 namespace prime::optimus::detail {
 
-// Appends one entry to a source's stream, atomically on the server:
-//   n  the entry's sequence number (one more than the last entry's), so a
-//      reader can count what trimming took from it;
-//   t  the sensor stamp (steady clock, ns), d the encoded message;
-//   x  for a `block` source, the readers this entry was dropped for
-//      (",id,id,"), because they made no room in time.
+// Appends one entry to a source's stream, atomically on the server, in the
+// epoch of its last entry (a new one, the server's time, when it has none).
 // The stream is trimmed to exactly ARGV[1] entries. Mode ARGV[4]: "drop"
 // appends; "wait" appends only if every registered reader has room and
 // otherwise returns {0, full}; "force" appends and marks the full readers.
@@ -34,11 +41,14 @@ namespace prime::optimus::detail {
 // The readers hash holds, per reader id, "r<id>" = reader_progress() and
 // "l<id>" = how many values were dropped for it.
 inline constexpr std::string_view kPublishScript = R"lua(
-local n = 1
+local epoch, n
 local last = redis.call('XREVRANGE', KEYS[1], '+', '-', 'COUNT', 1)
 if #last > 0 then
-  local previous = tonumber(last[1][2][2])
-  if previous then n = previous + 1 end
+  local ms, k = string.match(last[1][1], '^(%d+)-(%d+)$')
+  epoch, n = ms, tonumber(k) + 2
+else
+  local now = redis.call('TIME')
+  epoch, n = now[1] .. string.format('%03d', math.floor(tonumber(now[2]) / 1000)), 1
 end
 local full = {}
 if ARGV[4] ~= 'drop' then
@@ -53,38 +63,12 @@ if ARGV[4] ~= 'drop' then
 end
 if #full > 0 then
   for _, reader in ipairs(full) do redis.call('HINCRBY', KEYS[2], 'l' .. reader, 1) end
-  redis.call('XADD', KEYS[1], 'MAXLEN', ARGV[1], '*', 'n', tostring(n), 't', ARGV[2], 'd', ARGV[3], 'x', ',' .. table.concat(full, ',') .. ',')
+  redis.call('XADD', KEYS[1], 'MAXLEN', ARGV[1], epoch .. '-*', 't', ARGV[2], 'd', ARGV[3], 'x', ',' .. table.concat(full, ',') .. ',')
 else
-  redis.call('XADD', KEYS[1], 'MAXLEN', ARGV[1], '*', 'n', tostring(n), 't', ARGV[2], 'd', ARGV[3])
+  redis.call('XADD', KEYS[1], 'MAXLEN', ARGV[1], epoch .. '-*', 't', ARGV[2], 'd', ARGV[3])
 end
 return {1, #full}
 )lua";
-
-// Appends a batch of entries in one call, as kPublishScript's "drop" mode
-// would one by one (a batch never waits for readers): the last entry's n is
-// read once, and the stream is trimmed once, to exactly ARGV[1] entries.
-//   KEYS: stream.  ARGV: maxlen, then stamp, message for each entry.
-// Returns the number of entries appended. (Both scripts pass n through
-// tostring: redis.call's own conversion of a Lua number costs more.)
-inline constexpr std::string_view kPublishBatchScript = R"lua(
-local n = 0
-local last = redis.call('XREVRANGE', KEYS[1], '+', '-', 'COUNT', 1)
-if #last > 0 then
-  local previous = tonumber(last[1][2][2])
-  if previous then n = previous end
-end
-local appended = 0
-for i = 2, #ARGV - 1, 2 do
-  n = n + 1
-  redis.call('XADD', KEYS[1], '*', 'n', tostring(n), 't', ARGV[i], 'd', ARGV[i + 1])
-  appended = appended + 1
-end
-redis.call('XTRIM', KEYS[1], 'MAXLEN', ARGV[1])
-return appended
-)lua";
-// Entries per call of the batch script: a pipelined batch is sent as calls
-// of this many, so no call holds the server for long.
-inline constexpr std::size_t kBatchEntries = 256;
 
 // The script's modes (ARGV[4]).
 inline constexpr std::string_view kAppendDrop = "drop";
@@ -99,6 +83,34 @@ template <class N>
 bool parse_number(std::string_view text, N& out) {
   const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), out);
   return ec == std::errc{} && end == text.data() + text.size();
+}
+
+// An entry's id: its stream's epoch and its sequence number.
+struct EntryId {
+  std::uint64_t epoch = 0;
+  std::uint64_t seq = 0;  // k + 1 for the id "<epoch>-<k>"
+};
+inline std::optional<EntryId> entry_id(std::string_view id) {
+  const auto dash = id.find('-');
+  EntryId out;
+  std::uint64_t k = 0;
+  if (dash == std::string_view::npos || !parse_number(id.substr(0, dash), out.epoch) ||
+      !parse_number(id.substr(dash + 1), k))
+    return std::nullopt;
+  out.seq = k + 1;
+  return out;
+}
+
+// What a writer appends with in a stream's epoch: the server numbers the entry.
+inline std::string append_id(std::uint64_t epoch) { return std::to_string(epoch) + "-*"; }
+
+// An epoch from a reply of TIME: the server's time in ms.
+inline std::optional<std::uint64_t> epoch_from_time(const redisReply& time) {
+  std::uint64_t seconds = 0, micros = 0;
+  if (time.type != REDIS_REPLY_ARRAY || time.elements != 2 || !parse_number(text(*time.element[0]), seconds) ||
+      !parse_number(text(*time.element[1]), micros))
+    return std::nullopt;
+  return seconds * 1000 + micros / 1000;
 }
 
 // A reader's fields in the readers hash.
@@ -129,10 +141,9 @@ inline std::optional<StreamEntry> stream_entry(const redisReply& entry) {
   return StreamEntry{text(*entry.element[0]), entry.element[1]};
 }
 
-// An entry's fields as the publish script writes them. Null when one of n, t
-// and d is missing or not what Prime writes (not a Prime entry).
+// An entry's fields as Prime's writers write them. Null when t or d is
+// missing or not what Prime writes (not a Prime entry).
 struct EntryFields {
-  std::uint64_t seq = 0;
   std::int64_t stamp_ns = 0;
   std::string_view message;
   std::optional<std::string_view> dropped_for;  // x
@@ -144,10 +155,9 @@ struct EntryFields {
 };
 inline std::optional<EntryFields> entry_fields(const redisReply& fields) {
   EntryFields out;
-  const auto n = entry_field(fields, "n");
   const auto t = entry_field(fields, "t");
   const auto d = entry_field(fields, "d");
-  if (!n || !parse_number(*n, out.seq) || !t || !parse_number(*t, out.stamp_ns) || !d) return std::nullopt;
+  if (!t || !parse_number(*t, out.stamp_ns) || !d) return std::nullopt;
   out.message = *d;
   out.dropped_for = entry_field(fields, "x");
   return out;

@@ -57,7 +57,7 @@ class StreamReader final : public Reader<T>::Impl {
     if ((**last).type == REDIS_REPLY_ARRAY && (**last).elements == 1) {
       if (const auto entry = stream_entry(*(**last).element[0])) {
         cursor_ = std::string{entry->id};
-        if (auto n = entry_field(*entry->fields, "n")) parse_number(*n, seq_);
+        if (const auto id = entry_id(entry->id)) last_ = *id;
       }
     }
     if (block_) {
@@ -125,7 +125,7 @@ class StreamReader final : public Reader<T>::Impl {
     return sample;
   }
 
-  std::string progress() const { return reader_progress(seq_, capacity_); }
+  std::string progress() const { return reader_progress(last_.seq, capacity_); }
   Error stopped() const { return {Errc::stopped, "source '" + state_->name() + "': the reader was stopped"}; }
   Error timed_out() const { return {Errc::timeout, "source '" + state_->name() + "': no value before the deadline"}; }
 
@@ -195,6 +195,14 @@ class StreamReader final : public Reader<T>::Impl {
       const auto entry = stream_entry(*entries.element[reversed ? n - 1 - k : k]);
       if (!entry) continue;
       cursor_ = std::string{entry->id};
+      if (const auto id = entry_id(entry->id)) {
+        // What trimming took, or what was skipped for the newest: a gap in
+        // the epoch, or the entries of a new one (the stream began again)
+        // before this.
+        const auto before = id->epoch == last_.epoch ? last_.seq : 0;
+        if (id->seq > before + 1) lost_ += id->seq - before - 1;
+        last_ = *id;
+      }
       const auto fields = entry_fields(*entry->fields);
       if (!fields) {
         ++lost_;
@@ -202,10 +210,6 @@ class StreamReader final : public Reader<T>::Impl {
                                                  state_->key() + "' is not a Prime entry; skipped"});
         continue;
       }
-      const auto seq = fields->seq;
-      if (seq > seq_ + 1) lost_ += seq - seq_ - 1;  // trimmed away, or skipped for the newest
-      // seq <= seq_: the stream began again (a server restart): nothing to count.
-      seq_ = seq;
       if (block_ && fields->dropped_for_reader(reader_id_))
         continue;  // dropped for this reader by a writer it kept waiting; counted by the writer
       auto value = decode_message<T>(fields->message, "source '" + state_->name() + "', key '" + state_->key() + "'");
@@ -235,7 +239,7 @@ class StreamReader final : public Reader<T>::Impl {
   std::string lost_field_;
   std::string capacity_;
   std::string cursor_ = "0-0";
-  std::uint64_t seq_ = 0;
+  EntryId last_;  // of the last entry read (or the newest when subscribing)
   std::uint64_t lost_ = 0;
   std::deque<Sample<T>> cache_;
 };

@@ -1,7 +1,6 @@
 #pragma once
 
 #include <algorithm>
-#include <array>
 #include <chrono>
 #include <cstddef>
 #include <expected>
@@ -26,8 +25,8 @@
 #include "prime/topology/detail/runtime_state.hpp"
 #include "prime/topology/qos.hpp"
 
-// The writing side of a source's stream: StreamState appends to it with the
-// publish script of stream_protocol.hpp. Every handle of a source can
+// The writing side of a source's stream: StreamState appends to it as
+// stream_protocol.hpp says. Every handle of a source can
 // publish, so this is also what the handles share; a reader
 // (stream_reader.hpp) holds it to keep its source, and what feeds it, alive.
 
@@ -103,51 +102,62 @@ class StreamState {
   }
 
   // Appends many encoded messages in one round trip (drop_oldest semantics:
-  // a batch never waits for readers): calls of the batch script, each
-  // appending up to kBatchEntries, pipelined. A call the server refused
-  // because it lost the script (a restart) appended nothing: it is sent
-  // again, the others are not.
+  // a batch never waits for readers): one XADD each, in the stream's epoch,
+  // numbered by the server, then one XTRIM, pipelined. No script: the
+  // server appends as it does for any client.
+  // The server refuses an append when the stream is gone (NOMKSTREAM:
+  // deleted, or lost in a restart), or has a later epoch than this writer
+  // knew (another writer began one, or an entry not Prime's came in); then
+  // what it refused goes again, in order, in a new epoch or the later one.
   std::expected<void, Error> publish_all(std::span<const std::pair<std::string, Clock::time_point>> messages) {
     auto lease = pool_->acquire();
     if (!lease) return std::unexpected(named(lease.error()));
     auto& c = **lease;
     c.set_timeout(command_timeout());
-    std::vector<std::span<const std::pair<std::string, Clock::time_point>>> calls;
-    for (std::size_t i = 0; i < messages.size(); i += kBatchEntries)
-      calls.push_back(messages.subspan(i, std::min(kBatchEntries, messages.size() - i)));
     std::vector<std::string> stamps;
-    std::vector<std::string_view> args;
-    for (int attempt = 0; attempt < 2 && !calls.empty(); ++attempt) {
-      const auto sha = script_sha(c, Script::batch);
-      if (!sha) return std::unexpected(std::move(sha.error()));
-      for (const auto& call : calls) {
-        stamps.clear();
-        stamps.reserve(call.size());  // no reallocation: args holds views of these
-        args.assign({"EVALSHA", *sha, "1", key_, maxlen_});
-        for (const auto& [message, stamp] : call) {
-          stamps.push_back(std::to_string(stamp_ns(stamp)));
-          args.push_back(stamps.back());
-          args.push_back(message);
-        }
-        c.append(args);
+    stamps.reserve(messages.size());
+    for (const auto& m : messages) stamps.push_back(std::to_string(stamp_ns(m.second)));
+    std::vector<std::size_t> pending(messages.size());
+    for (std::size_t i = 0; i < pending.size(); ++i) pending[i] = i;
+    for (int attempt = 0; !pending.empty(); ++attempt) {
+      if (attempt == kAppendAttempts)
+        return std::unexpected(Error{Errc::unreachable, "source '" + name_ + "': the server refused " +
+                                                            std::to_string(pending.size()) + " appends " +
+                                                            std::to_string(attempt) + " times: its stream keeps changing"});
+      auto epoch = stream_epoch(c);
+      if (!epoch) return std::unexpected(std::move(epoch.error()));
+      const auto id = append_id(epoch->epoch);
+      // Sent kFlushEvery at a time: the server appends the first while the
+      // next are written out. (A failure to send shows in the replies.)
+      std::size_t queued = 0;
+      for (const auto i : pending) {
+        if (epoch->begins)
+          c.append({"XADD", key_, id, "t", stamps[i], "d", messages[i].first});
+        else
+          c.append({"XADD", key_, "NOMKSTREAM", id, "t", stamps[i], "d", messages[i].first});
+        if (++queued % kFlushEvery == 0) c.flush();
       }
-      std::vector<std::span<const std::pair<std::string, Clock::time_point>>> again;
-      std::optional<Error> first_error;
-      for (const auto& call : calls) {
+      c.append({"XTRIM", key_, "MAXLEN", maxlen_});
+      std::vector<std::size_t> refused;
+      std::optional<Error> failed;
+      for (const auto i : pending) {
         auto r = c.reply();
         if (!r) return std::unexpected(named(r.error()));
-        if (!is_error(**r)) continue;
-        if (text(**r).starts_with("NOSCRIPT"))
-          again.push_back(call);
-        else if (!first_error)
-          first_error = server_error(**r, "source '" + name_ + "': publishing");
+        if (is_nil(**r)) {
+          refused.push_back(i);
+          forget_epoch(epoch->epoch);  // the stream is gone
+        } else if (is_error(**r) && text(**r).find("equal or smaller") != std::string_view::npos) {
+          refused.push_back(i);
+          forget_epoch();  // the stream went on in a later epoch
+        } else if (is_error(**r) && !failed) {
+          failed = server_error(**r, "source '" + name_ + "': publishing");
+        }
       }
-      if (first_error) return std::unexpected(*first_error);
-      if (!again.empty()) forget_script(Script::batch);
-      calls = std::move(again);
+      auto trimmed = c.reply();
+      if (!trimmed) return std::unexpected(named(trimmed.error()));
+      if (failed) return std::unexpected(*failed);
+      pending = std::move(refused);
     }
-    if (!calls.empty())
-      return std::unexpected(Error{Errc::unreachable, "source '" + name_ + "': the server keeps losing its script"});
     return {};
   }
 
@@ -163,24 +173,69 @@ class StreamState {
  private:
   using ScriptResult = std::pair<bool, long long>;
 
-  enum class Script { one, batch };  // kPublishScript, kPublishBatchScript
+  // The epoch a batch appends in, and whether it begins the stream (so the
+  // appends may create it).
+  struct Epoch {
+    std::uint64_t epoch;
+    bool begins;
+  };
+  static constexpr int kAppendAttempts = 4;
+  static constexpr std::size_t kFlushEvery = 16;  // appends sent together in a batch
 
-  std::expected<std::string, Error> script_sha(Connection& c, Script which = Script::one) {
-    auto& sha = shas_[static_cast<std::size_t>(which)];
+  // The stream's epoch as this writer last saw it; else its last entry's;
+  // else (no stream, or it is gone) a new one, at the server's time.
+  std::expected<Epoch, Error> stream_epoch(Connection& c) {
+    std::optional<std::uint64_t> gone;
     {
       std::scoped_lock lock{mutex_};
-      if (!sha.empty()) return sha;
+      if (epoch_) return Epoch{*epoch_, false};
+      gone = gone_epoch_;
     }
-    auto loaded = c.command({"SCRIPT", "LOAD", which == Script::one ? kPublishScript : kPublishBatchScript});
+    if (!gone) {
+      auto last = c.command({"XREVRANGE", key_, "+", "-", "COUNT", "1"});
+      if (!last) return std::unexpected(named(last.error()));
+      if (is_error(**last)) return std::unexpected(server_error(**last, "source '" + name_ + "': publishing"));
+      if ((**last).type == REDIS_REPLY_ARRAY && (**last).elements == 1)
+        if (const auto entry = stream_entry(*(**last).element[0]))
+          if (const auto id = entry_id(entry->id)) {
+            std::scoped_lock lock{mutex_};
+            epoch_ = id->epoch;
+            return Epoch{id->epoch, false};
+          }
+    }
+    auto time = c.command({"TIME"});
+    if (!time) return std::unexpected(named(time.error()));
+    auto epoch = epoch_from_time(**time);
+    if (!epoch) return std::unexpected(Error{Errc::type_mismatch, "source '" + name_ + "': an unexpected reply to TIME"});
+    if (gone) epoch = std::max(*epoch, *gone + 1);
+    std::scoped_lock lock{mutex_};
+    epoch_ = *epoch;
+    gone_epoch_.reset();
+    return Epoch{*epoch, true};
+  }
+  // The next batch learns the stream's epoch again, or (`gone`: the stream
+  // of that epoch is gone) begins the stream in a later one.
+  void forget_epoch(std::optional<std::uint64_t> gone = std::nullopt) {
+    std::scoped_lock lock{mutex_};
+    epoch_.reset();
+    if (gone) gone_epoch_ = gone;
+  }
+
+  std::expected<std::string, Error> script_sha(Connection& c) {
+    {
+      std::scoped_lock lock{mutex_};
+      if (!sha_.empty()) return sha_;
+    }
+    auto loaded = c.command({"SCRIPT", "LOAD", kPublishScript});
     if (!loaded) return std::unexpected(named(loaded.error()));
     if (is_error(**loaded)) return std::unexpected(server_error(**loaded, "source '" + name_ + "': loading its script"));
     std::scoped_lock lock{mutex_};
-    sha = std::string{text(**loaded)};
-    return sha;
+    sha_ = std::string{text(**loaded)};
+    return sha_;
   }
-  void forget_script(Script which = Script::one) {
+  void forget_script() {
     std::scoped_lock lock{mutex_};
-    shas_[static_cast<std::size_t>(which)].clear();
+    sha_.clear();
   }
 
   // EVALSHA, loading the script again when the server lost it (a restart).
@@ -215,7 +270,9 @@ class StreamState {
   const std::weak_ptr<prime::detail::RuntimeState> runtime_;
   const std::string maxlen_;
   std::mutex mutex_;
-  std::array<std::string, 2> shas_;  // SHA1 of each script once loaded, by Script
+  std::string sha_;  // SHA1 of kPublishScript once loaded
+  std::optional<std::uint64_t> epoch_;       // what publish_all appends in, once known
+  std::optional<std::uint64_t> gone_epoch_;  // the epoch of a stream found gone
   prime::Connection upstream_;  // last member: disconnects before the rest goes
 };
 
