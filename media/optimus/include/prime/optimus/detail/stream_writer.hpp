@@ -121,7 +121,7 @@ class StreamState {
     for (std::size_t i = 0; i < pending.size(); ++i) pending[i] = i;
     for (int attempt = 0; !pending.empty(); ++attempt) {
       if (attempt == kAppendAttempts)
-        return std::unexpected(Error{Errc::unreachable, "source '" + name_ + "': the server refused " +
+        return std::unexpected(Error{Errc::limit_exceeded, "source '" + name_ + "': the server refused " +
                                                             std::to_string(pending.size()) + " appends " +
                                                             std::to_string(attempt) + " times: its stream keeps changing"});
       auto epoch = stream_epoch(c);
