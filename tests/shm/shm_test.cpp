@@ -154,6 +154,28 @@ TEST_F(ShmTest, ALateJoinerGetsTheHistoryItAsksFor) {
   EXPECT_TRUE(core.subscribe<int>("map", {}, qos).subscribe().read_all().empty()) << "no history by default";
 }
 
+// A ring whose capacity is not a power of two is indexed by remainder, not
+// by mask: it wraps in order, and a slow reader loses exactly what was
+// overwritten.
+TEST_F(ShmTest, ARingOfCapacityNotAPowerOfTwoWrapsInOrder) {
+  const shm::TopicQos qos{.capacity = 5};
+  auto publisher = core.publisher<int>("odd", qos);
+  auto reader = core.subscribe<int>("odd", {}, qos).subscribe();
+  for (int round = 0; round < 7; ++round) {  // 35 sequences: seven laps of the ring
+    for (int i = 0; i < 5; ++i) ASSERT_TRUE(publisher.publish(round * 5 + i));
+    for (int i = 0; i < 5; ++i) {
+      auto s = reader.try_read();
+      ASSERT_TRUE(s) << "round " << round;
+      EXPECT_EQ(*s->value, round * 5 + i);
+    }
+  }
+  for (int i = 35; i < 48; ++i) ASSERT_TRUE(publisher.publish(i));
+  std::vector<int> kept;
+  while (auto s = reader.try_read()) kept.push_back(*s->value);
+  EXPECT_EQ(kept, (std::vector<int>{43, 44, 45, 46, 47}));
+  EXPECT_EQ(reader.lost(), 8u);
+}
+
 TEST_F(ShmTest, DropOldestNeverWaitsAndTellsTheSlowSubscriberWhatItLost) {
   const shm::TopicQos qos{.capacity = 4};
   auto publisher = core.publisher<int>("lidar", qos);

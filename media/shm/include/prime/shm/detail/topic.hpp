@@ -1,6 +1,7 @@
 #pragma once
 
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -57,7 +58,12 @@ class Topic {
   [[nodiscard]] const Segment& segment() const noexcept { return segment_; }
   [[nodiscard]] Registry& registry() const noexcept { return *registry_; }
   [[nodiscard]] TopicHeader& header() const noexcept { return *header_; }
-  [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept { return ring_[seq % header_->capacity]; }
+  [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept { return ring_[ring_index(seq)]; }
+  // Where `seq` lands in the ring: a mask where the capacity is a power of
+  // two (a division costs more than the rest of a poll), else the remainder.
+  [[nodiscard]] std::uint64_t ring_index(std::uint64_t seq) const noexcept {
+    return ring_mask_ != 0 ? seq & ring_mask_ : seq % capacity_;
+  }
   [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept {
     return *std::launder(reinterpret_cast<ChunkHeader*>(chunks_ + i * header_->chunk_stride));
   }
@@ -124,7 +130,9 @@ class Topic {
         segment_{std::move(segment)},
         header_{std::launder(reinterpret_cast<TopicHeader*>(segment_.data()))},
         ring_{reinterpret_cast<std::atomic<std::uint64_t>*>(segment_.data() + header_->ring_offset)},
-        chunks_{segment_.data() + header_->chunks_offset} {}
+        chunks_{segment_.data() + header_->chunks_offset},
+        capacity_{header_->capacity},
+        ring_mask_{std::has_single_bit(capacity_) ? capacity_ - 1 : 0} {}
 
   static bool is_set_up(const std::string& name, std::byte* data, std::size_t size) {
     if (size < sizeof(TopicHeader)) return false;
@@ -172,6 +180,8 @@ class Topic {
   TopicHeader* header_;
   std::atomic<std::uint64_t>* ring_;
   std::byte* chunks_;
+  std::uint64_t capacity_;   // the header's, read once
+  std::uint64_t ring_mask_;  // capacity_ - 1 where that is a power of two, else 0
 };
 
 }  // namespace prime::shm::detail

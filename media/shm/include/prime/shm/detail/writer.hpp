@@ -129,7 +129,6 @@ class Writer {
   // not once for each), then the head and one wake.
   void publish_some(std::span<const std::uint32_t> chunks, std::size_t size,
                     std::span<const Clock::time_point> stamps) noexcept {
-    auto& h = topic_->header();
     const auto first = next_;
     for (std::size_t i = 0; i < chunks.size(); ++i) {
       auto& c = topic_->chunk(chunks[i]);
@@ -143,7 +142,7 @@ class Writer {
     next_ = first + chunks.size();
     store_head(next_);
     for (std::size_t i = 0; i < chunks.size(); ++i)
-      if (const auto old = std::exchange(in_ring_[(first + i) % h.capacity], chunks[i]); old != kNoChunk) leave(old);
+      if (const auto old = std::exchange(in_ring_[topic_->ring_index(first + i)], chunks[i]); old != kNoChunk) leave(old);
     wake_subscribers();
     claim_ahead();
   }
@@ -156,7 +155,6 @@ class Writer {
   // publisher killed in between leaves a head no later than the ring (see
   // recover). Then the chunk the entry pushed out of the ring is let go.
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
-    auto& h = topic_->header();
     auto& c = topic_->chunk(chunk);
     const auto seq = next_++;
     c.size = size;
@@ -165,7 +163,7 @@ class Writer {
     to_ring(c);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
     store_head(seq + 1);
-    if (const auto old = std::exchange(in_ring_[seq % h.capacity], chunk); old != kNoChunk) leave(old);
+    if (const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk); old != kNoChunk) leave(old);
     wake_subscribers();
     claim_ahead();
   }
@@ -209,7 +207,7 @@ class Writer {
     }
     // The chunk the next sequence pushes out of the ring: its line, last
     // written by the subscriber that released it, is fetched meanwhile.
-    const auto next_out = in_ring_[next_ % in_ring_.size()];
+    const auto next_out = in_ring_[topic_->ring_index(next_)];
     if (next_out != kNoChunk) prefetch_for_write(&topic_->chunk(next_out));
   }
 
