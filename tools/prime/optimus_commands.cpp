@@ -15,6 +15,7 @@
 #include "message_text.hpp"
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
+#include "prime/optimus/detail/stream_protocol.hpp"
 #include "shm_commands.hpp"
 #include "stats.hpp"
 #include "table.hpp"
@@ -195,9 +196,8 @@ int optimus_watch(const Options& o, const std::string& command) {
         const auto data = fields["d"];
         if (command == "echo") {
           const std::span<const std::byte> bytes{reinterpret_cast<const std::byte*>(data.data()), data.size()};
-          // The entry's id is "<epoch>-<k>": its sequence number is k + 1 (stream_protocol.hpp).
-          const auto k = last.substr(last.find('-') + 1);
-          std::cout << "sequence: " << std::stoull(k) + 1 << "\nstamp: " << fields["t"] << " ns\nsize: " << data.size()
+          const auto id = prime::optimus::detail::entry_id(last);
+          std::cout << "sequence: " << (id ? std::to_string(id->seq) : "?") << "\nstamp: " << fields["t"] << " ns\nsize: " << data.size()
                     << "\nbytes: " << hex(bytes) << "\n---" << std::endl;
         } else if (command == "hz") {
           if (previous) values.add(std::chrono::duration<double>(now - *previous).count());

@@ -7,6 +7,7 @@
 #include <initializer_list>
 #include <memory>
 #include <mutex>
+#include <numeric>
 #include <optional>
 #include <span>
 #include <string>
@@ -118,7 +119,7 @@ class StreamState {
     stamps.reserve(messages.size());
     for (const auto& m : messages) stamps.push_back(std::to_string(stamp_ns(m.second)));
     std::vector<std::size_t> pending(messages.size());
-    for (std::size_t i = 0; i < pending.size(); ++i) pending[i] = i;
+    std::iota(pending.begin(), pending.end(), std::size_t{0});
     for (int attempt = 0; !pending.empty(); ++attempt) {
       if (attempt == kAppendAttempts)
         return std::unexpected(Error{Errc::limit_exceeded, "source '" + name_ + "': the server refused " +
