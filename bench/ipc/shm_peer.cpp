@@ -11,15 +11,22 @@
 //                    at once (spin 0): the peer of FutexWake.
 //   Throughput       the child publishes back-to-back on a `block` topic
 //                    kStreamDepth deep (lossless: it waits for the parent);
-//                    the parent busy-polls, one sample per iteration.
+//                    the parent busy-polls, one sample per iteration. Each
+//                    sample carries its sensor's stamp, as a driver passes it
+//                    on (no clock read per message: the other peers stamp
+//                    nothing).
+//   ShmClock         Throughput with publish()'s default stamp, the clock
+//                    read at each publish: what that read costs here.
 //   ShmLight         Throughput with the publisher's PublishFence::light:
 //                    no full fence per publish (the parent busy-polls, so it
 //                    never needs the membarrier that makes up for it).
 //   ShmBatch         the same in batches: the child loans and publishes up to
-//                    kBatch at once (loan_some), the parent takes every
-//                    sample available, up to kBatch, in one read_some.
+//                    kBatch at once (loan_some), each with its sensor's
+//                    stamp; the parent takes every sample available, up to
+//                    kBatch, in one read_some.
 #include <chrono>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -46,11 +53,14 @@ shm::TopicQos batch_qos(std::size_t bytes) {
   return qos;
 }
 
-void send(shm::Publisher<shm::Bytes>& publisher, std::size_t bytes, std::uint64_t seq) {
+// Publishes `seq` stamped `stamp`, or (none) with publish()'s default stamp.
+void send(shm::Publisher<shm::Bytes>& publisher, std::size_t bytes, std::uint64_t seq,
+          std::optional<prime::Clock::time_point> stamp = std::nullopt) {
   auto sample = publisher.loan(bytes);
   if (!sample) throw ipc::PeerError{"shm: " + sample.error().describe()};
   ipc::stamp(sample->bytes().data(), seq);
-  std::move(*sample).publish();
+  if (stamp) std::move(*sample).publish(*stamp);
+  else std::move(*sample).publish();
 }
 
 bool try_take(prime::Reader<shm::View<shm::Bytes>>& reader, std::uint64_t seq) {
@@ -93,23 +103,31 @@ void echo(ipc::Child& self) {
 const ipc::ChildEntry kEcho{"Shm.echo", echo<false>};
 const ipc::ChildEntry kEchoSleeping{"Shm.echo_sleeping", echo<true>};
 
-template <shm::PublishFence kFence>
+// kClock: publish()'s default stamp (the clock read per sample), else the
+// sensor's: its clock's reading at the start, one tick per sample on.
+template <shm::PublishFence kFence, bool kClock>
 void stream(ipc::Child& self) {
   shm::Core core{self.arg(0)};
   auto out = core.publisher<shm::Bytes>("stream", stream_qos(self.bytes(), kFence));
   self.ready();
+  const auto start = prime::Clock::now();
   for (std::uint64_t seq = 1;; ++seq) {
     if (seq % 1024 == 0) self.check();
-    send(out, self.bytes(), seq);
+    if (kClock) send(out, self.bytes(), seq);
+    else send(out, self.bytes(), seq, start + prime::Clock::duration{seq});
   }
 }
-const ipc::ChildEntry kStream{"Shm.stream", stream<shm::PublishFence::full>};
-const ipc::ChildEntry kStreamLight{"Shm.stream_light", stream<shm::PublishFence::light>};
+const ipc::ChildEntry kStream{"Shm.stream", stream<shm::PublishFence::full, false>};
+const ipc::ChildEntry kStreamLight{"Shm.stream_light", stream<shm::PublishFence::light, false>};
+const ipc::ChildEntry kStreamClock{"Shm.stream_clock", stream<shm::PublishFence::full, true>};
 
 void stream_batches(ipc::Child& self) {
   shm::Core core{self.arg(0)};
   auto out = core.publisher<shm::Bytes>("stream", batch_qos(self.bytes()));
   self.ready();
+  const auto start = prime::Clock::now();
+  std::vector<prime::Clock::time_point> stamps;  // each sample's, from its sensor (as stream's)
+  stamps.reserve(kBatch);
   for (std::uint64_t seq = 1, checked = 0;;) {
     if (seq - checked >= 1024) {
       self.check();
@@ -117,8 +135,12 @@ void stream_batches(ipc::Child& self) {
     }
     auto batch = out.loan_some(kBatch, self.bytes());
     if (!batch) throw ipc::PeerError{"shm: " + batch.error().describe()};
-    for (std::size_t i = 0; i < batch->size(); ++i) ipc::stamp(batch->bytes(i).data(), seq++);
-    std::move(*batch).publish();
+    stamps.clear();
+    for (std::size_t i = 0; i < batch->size(); ++i, ++seq) {
+      ipc::stamp(batch->bytes(i).data(), seq);
+      stamps.push_back(start + prime::Clock::duration{seq});
+    }
+    std::move(*batch).publish(stamps);
   }
 }
 const ipc::ChildEntry kStreamBatches{"Shm.stream_batches", stream_batches};
@@ -148,13 +170,14 @@ void BM_Latency_ShmSleeping(benchmark::State& state) { latency<true>(state); }
 BENCHMARK(BM_Latency_Shm)->Apply(ipc::latency_payloads);
 BENCHMARK(BM_Latency_ShmSleeping)->Arg(64)->UseRealTime();
 
-template <shm::PublishFence kFence>
+template <shm::PublishFence kFence, bool kClock = false>
 void throughput(benchmark::State& state) {
   ipc::run(state, [&](std::size_t bytes) {
     const auto domain = ipc::new_shm_domain();
     shm::Core core{domain};
     auto in = core.subscribe<shm::Bytes>("stream", {}, stream_qos(bytes)).subscribe();
-    ipc::Link child{kFence == shm::PublishFence::light ? "Shm.stream_light" : "Shm.stream", bytes, {}, {domain}};
+    ipc::Link child{kClock ? "Shm.stream_clock" : kFence == shm::PublishFence::light ? "Shm.stream_light" : "Shm.stream",
+                    bytes, {}, {domain}};
     child.set_drain([&] {
       while (in.try_read()) {  // one view at a time: the topic lets a subscriber hold 4
       }
@@ -170,6 +193,8 @@ void BM_Throughput_Shm(benchmark::State& state) { throughput<shm::PublishFence::
 void BM_Throughput_ShmLight(benchmark::State& state) { throughput<shm::PublishFence::light>(state); }
 BENCHMARK(BM_Throughput_Shm)->Apply(ipc::throughput_payloads);
 BENCHMARK(BM_Throughput_ShmLight)->Apply(ipc::throughput_payloads);
+void BM_Throughput_ShmClock(benchmark::State& state) { throughput<shm::PublishFence::full, true>(state); }
+BENCHMARK(BM_Throughput_ShmClock)->Arg(64)->UseRealTime();
 
 void BM_Throughput_ShmBatch(benchmark::State& state) {
   ipc::run(state, [&](std::size_t bytes) {

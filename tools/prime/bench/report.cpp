@@ -333,13 +333,16 @@ std::string headline(const Results& r) {
   row("Shm one-way latency, sleeping reader, 64 B, p50", p50("Shm", "latency-sleeping", 64), false,
       {{"futex wake floor", p50("FutexWake", "latency-sleeping", 64)},
        {"iceoryx (WaitSet)", p50("IceoryxWaitSet", "latency-sleeping", 64)}});
-  row("Shm lossless throughput, 64 B", r.find("Shm", "throughput", 64, "rate"), true,
+  row("Shm lossless throughput, 64 B (sensor's stamp)", r.find("Shm", "throughput", 64, "rate"), true,
       {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
        {"iceoryx", r.find("Iceoryx", "throughput", 64, "rate")},
        {"Fast DDS", fast_dds("throughput", 64, true)}});
   row("Shm lossless throughput, publisher's PublishFence::light, 64 B", r.find("ShmLight", "throughput", 64, "rate"), true,
       {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
        {"Shm with full fences", r.find("Shm", "throughput", 64, "rate")}});
+  row("Shm lossless throughput, publisher reading the clock for each stamp (publish()'s default), 64 B",
+      r.find("ShmClock", "throughput", 64, "rate"), true,
+      {{"with the sensor's stamp", r.find("Shm", "throughput", 64, "rate")}});
   row("Shm lossless throughput in batches (loan_some / read_some), 64 B", r.find("ShmBatch", "throughput", 64, "rate"), true,
       {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
        {"Shm one at a time", r.find("Shm", "throughput", 64, "rate")}});

@@ -133,8 +133,8 @@ class Batch {
 
   // Publishes every slot, stamped `stamp`.
   void publish(Clock::time_point stamp = Clock::now()) && {
-    const std::vector<Clock::time_point> stamps(chunks_.size(), stamp);
-    std::move(*this).publish(stamps);
+    owner_->writer.publish_some(chunks_, size_, [&](std::size_t) { return stamp; });
+    end();
   }
   // Publishes every slot, slot i stamped stamps[i] (as many stamps as slots).
   void publish(std::span<const Clock::time_point> stamps) && {
@@ -142,9 +142,8 @@ class Batch {
       throw Failure{{Errc::limit_exceeded, "topic '" + owner_->writer.topic()->name() + "': a batch of " +
                                                  std::to_string(chunks_.size()) + " slots published with " +
                                                  std::to_string(stamps.size()) + " stamps"}};
-    owner_->writer.publish_some(chunks_, size_, stamps);
-    chunks_.clear();
-    detail::LoaningWriter::end_loan(std::exchange(owner_, nullptr));
+    owner_->writer.publish_some(chunks_, size_, [&](std::size_t i) { return stamps[i]; });
+    end();
   }
 
  private:
@@ -158,6 +157,10 @@ class Batch {
   void discard() noexcept {
     if (!owner_) return;
     for (const auto chunk : chunks_) owner_->writer.discard(chunk);
+    end();
+  }
+  void end() noexcept {
+    chunks_.clear();
     detail::LoaningWriter::end_loan(std::exchange(owner_, nullptr));
   }
 

@@ -123,17 +123,17 @@ class Writer {
   void discard(std::uint32_t chunk) noexcept { topic_->chunk(chunk).holders.fetch_and(~kLoanBit); }
 
   // Publishes loaned chunks of `size` bytes each as the next sequences, in
-  // order, chunk i stamped stamps[i]. Never waits. As publish() does, for
+  // order, chunk i stamped stamp_of(i). Never waits. As publish() does, for
   // all at once: every header, then the ring entries one after another (a
   // subscriber polling the ring fetches its line once for several samples,
   // not once for each), then the head and one wake.
-  void publish_some(std::span<const std::uint32_t> chunks, std::size_t size,
-                    std::span<const Clock::time_point> stamps) noexcept {
+  template <class StampOf>
+  void publish_some(std::span<const std::uint32_t> chunks, std::size_t size, StampOf&& stamp_of) noexcept {
     const auto first = next_;
     for (std::size_t i = 0; i < chunks.size(); ++i) {
       auto& c = topic_->chunk(chunks[i]);
       c.size = size;
-      c.stamp = stamps[i].time_since_epoch().count();
+      c.stamp = stamp_of(i).time_since_epoch().count();
       c.seq.store(first + i, std::memory_order_release);
       to_ring(c);
     }
