@@ -9,12 +9,15 @@
 #include <cstdint>
 #include <fstream>
 #include <latch>
+#include <new>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "prime/liberty.hpp"
 #include "prime/shm.hpp"
+#include "prime/shm/detail/segment.hpp"
+#include "prime/shm/detail/service_layout.hpp"
 #include "shm/domain.hpp"
 #include "shm/mappings.hpp"
 #include "shm/mapped_topic.hpp"
@@ -46,6 +49,30 @@ class ServiceTest : public ::testing::Test {
  protected:
   shm::Core core{unique_domain("service"), {.participant = "server"}};
 };
+
+TEST_F(ServiceTest, ADamagedServiceFailsItsCallsByNameAndToolsPassItOver) {
+  core.serve("echo", [](const Pose& p) { return p; });
+  {
+    shm::Core server{core.domain(), {.participant = "planner"}};
+    server.serve("planner", plan);
+  }  // stopped: the damage below is not under a running server's feet
+  {
+    auto segment = shm::detail::Segment::open_existing(shm::detail::segment_name(core.domain(), "service", "planner"));
+    ASSERT_TRUE(segment);
+    std::launder(reinterpret_cast<shm::detail::ServiceHeader*>(segment->data()))->cell_count = 1000;
+  }
+  shm::Core client{core.domain(), {.participant = "client"}};
+  auto planner = client.chain<Pose, Path>("planner");
+  const auto value = planner.call({1, 1});
+  ASSERT_FALSE(value);
+  EXPECT_EQ(value.error().code, Errc::type_mismatch);
+  EXPECT_NE(value.error().message.find("service 'planner': its shared memory is damaged (1000 cells"), std::string::npos)
+      << value.error().describe();
+  EXPECT_FALSE(listed(client, "planner"));
+  EXPECT_TRUE(listed(client, "echo"));
+  auto echo = client.chain<Pose, Pose>("echo");
+  EXPECT_EQ(echo(Pose{2, 3}).y, 3.0);
+}
 
 TEST_F(ServiceTest, AServedBlockIsCalledLikeAnyChainAndListedInTheRegistry) {
   core.serve("planner", plan, {.workers = 2});

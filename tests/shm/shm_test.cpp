@@ -330,6 +330,29 @@ TEST_F(ShmTest, OpeningATopicWithAnotherTypeNamesTheTopicAndBothTypes) {
   EXPECT_TRUE(fails_with([&] { (void)other.publisher<double>("pose"); }, Errc::type_mismatch, "not double"));
 }
 
+// A header that a foreign or broken program wrote would send offsets out of
+// the segment, or divide by a capacity of 0: it is refused with what is
+// wrong, and tools show the rest of the domain.
+TEST_F(ShmTest, ADamagedTopicIsRefusedByNameAndPassedOverByTools) {
+  auto fine = core.publisher<int>("fine");
+  auto damaged = core.publisher<int>("damaged");
+  MappedTopic{core.domain(), "damaged"}.header().capacity = 0;
+  shm::Core other{core.domain()};  // with no mapping of its own yet
+  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("damaged"); }, Errc::type_mismatch,
+                         "topic 'damaged': its shared memory is damaged (a capacity of 0)"));
+  EXPECT_TRUE(fails_with([&] { (void)other.observe("damaged"); }, Errc::type_mismatch, "a capacity of 0"));
+  MappedTopic{core.domain(), "damaged"}.header().capacity = 1ull << 20;  // more chunks than the segment holds
+  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("damaged"); }, Errc::type_mismatch,
+                         "does not follow from its capacity"));
+  const auto seen = shm::inspect(core.domain());
+  ASSERT_TRUE(seen);
+  std::vector<std::string> names;
+  for (const auto& t : seen->topics) names.push_back(t.name);
+  EXPECT_EQ(names, std::vector<std::string>{"fine"});
+  EXPECT_EQ(other.reclaim(), 0u) << "reclaiming passes over the damaged topic too";
+  ASSERT_TRUE(other.subscribe<int>("fine").subscribe().try_read() == std::nullopt);
+}
+
 TEST_F(ShmTest, OtherQosIsRefusedWhicheverSideOpensTheTopicFirst) {
   const shm::TopicQos sixteen{.capacity = 16}, thirty_two{.capacity = 32};
   {

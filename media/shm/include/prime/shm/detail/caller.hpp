@@ -75,7 +75,6 @@ class Binding {
       if (Status::state(s) != CellState::free) continue;
       if (status.compare_exchange_strong(s, Status::pack(Status::ticket(s), CellState::claimed))) {
         if (gap > 0) slot.last_request.store(now, std::memory_order_relaxed);
-        slot.calls.fetch_add(1, std::memory_order_relaxed);
         return first + k;
       }
     }
@@ -97,7 +96,12 @@ class Binding {
       if (!service_->current()) release_slot();
     }
     if (!service_) {
-      auto found = Service::open_existing(registry_, name_);
+      std::shared_ptr<Service> found;
+      try {
+        found = Service::open_existing(registry_, name_);
+      } catch (const Failure& damaged) {
+        return std::unexpected(damaged.error());
+      }
       if (!found) return not_found("no service '" + name_ + "' in domain '" + registry_->domain() + "'");
       auto& h = found->header();
       if (!(h.request_type == request_) || !(h.reply_type == reply_))

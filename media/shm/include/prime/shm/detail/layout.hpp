@@ -159,4 +159,27 @@ struct TopicGeometry {
   [[nodiscard]] constexpr std::size_t bytes() const { return chunks_offset() + chunk_count() * chunk_stride(); }
 };
 
+// What is wrong with a topic's header against the segment it heads, which
+// is `size` bytes long; empty when nothing is. Whoever maps a segment reads
+// it with offsets and counts from its header: one written by a foreign or
+// broken program must not send them out of the segment (or divide by zero).
+inline std::string damage(const TopicHeader& h, std::size_t size) {
+  if (h.capacity == 0) return "a capacity of 0";
+  if (h.max_subscribers > kMaxSubscribers)
+    return std::to_string(h.max_subscribers) + " subscriber slots, more than " + std::to_string(kMaxSubscribers);
+  // Each bounded before the geometry multiplies them: a size can then not wrap around.
+  constexpr std::uint64_t kBound = 1ull << 40;
+  if (h.capacity >= kBound || h.max_message_size >= kBound || h.max_held >= (1u << 24))
+    return "a capacity of " + std::to_string(h.capacity) + ", messages of " + std::to_string(h.max_message_size) +
+           " bytes and max_held " + std::to_string(h.max_held);
+  const TopicGeometry g{h.capacity, h.max_message_size, h.max_subscribers, h.max_held};
+  if (g.chunk_count() >= kNoChunk) return std::to_string(g.chunk_count()) + " chunks, more than a ring entry can name";
+  if (h.chunk_count != g.chunk_count() || h.chunk_stride != g.chunk_stride() || h.ring_offset != g.ring_offset() ||
+      h.chunks_offset != g.chunks_offset())
+    return "a layout that does not follow from its capacity, message size and subscriber slots";
+  if (g.bytes() > size)
+    return std::to_string(g.bytes()) + " bytes of layout in a segment of " + std::to_string(size);
+  return {};
+}
+
 }  // namespace prime::shm::detail

@@ -51,7 +51,6 @@ class Server {
     h.timeout_ns.store(std::chrono::nanoseconds{qos.timeout}.count());
     h.requests.forget(~0ull);  // an earlier server's workers may have died asleep
     recover();
-    h.incarnation.fetch_add(1);
   }
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
@@ -249,7 +248,11 @@ class Server {
     if (known && known->current()) return known.get();
     const auto name = service_->registry().name_at(index, EndpointKind::service);
     if (!name) return nullptr;
-    known = Service::open_existing(service_->registry_handle(), *name);
+    try {
+      known = Service::open_existing(service_->registry_handle(), *name);
+    } catch (const Failure&) {
+      return nullptr;  // damaged: as if it were gone
+    }
     return known.get();
   }
 

@@ -58,11 +58,13 @@ class Service {
   }
 
   // For a client: the service `name` as it is, or null when there is none.
+  // Throws Failure (Errc::type_mismatch) when its header is damaged.
   static std::shared_ptr<Service> open_existing(std::shared_ptr<Registry> registry, const std::string& name) {
     auto segment = Segment::open_existing(segment_name(registry->domain(), "service", name));
     if (!segment || segment->size() < sizeof(ServiceHeader)) return nullptr;
     const auto* h = std::launder(reinterpret_cast<const ServiceHeader*>(segment->data()));
     if (h->magic.load(std::memory_order_acquire) != kServiceMagic || h->layout != kServiceLayout) return nullptr;
+    refuse_damaged(name, *h, segment->size());
     const auto index = registry->add(EndpointKind::service, name);
     return std::shared_ptr<Service>{new Service{std::move(registry), name, index, std::move(*segment)}};
   }
@@ -130,7 +132,6 @@ class Service {
       if (owner == 0 || owner == kReclaiming || registry_->alive(owner)) continue;
       if (!slot.owner.compare_exchange_strong(owner, kReclaiming)) continue;
       for (std::size_t k = 0; k < header_->calls_per_client; ++k) release(c * header_->calls_per_client + k);
-      slot.calls.store(0);
       slot.last_request.store(0);
       slot.owner.store(0);
       ++n;
@@ -183,7 +184,12 @@ class Service {
     if (magic == 0) return false;
     if (magic != kServiceMagic || h->layout != kServiceLayout)
       throw Failure{{Errc::type_mismatch, "service '" + name + "': made by another version of Prime"}};
+    refuse_damaged(name, *h, size);
     return true;
+  }
+  static void refuse_damaged(const std::string& name, const ServiceHeader& header, std::size_t size) {
+    if (const auto what = damage(header, size); !what.empty())
+      throw Failure{{Errc::type_mismatch, "service '" + name + "': its shared memory is damaged (" + what + ")"}};
   }
 
   static void set_up(std::byte* data, const ServiceSpec& spec, const ServiceGeometry& geometry) {

@@ -3,6 +3,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <string>
 
 #include "prime/common/fingerprint.hpp"
 #include "prime/shm/detail/doorbell.hpp"
@@ -23,7 +24,7 @@ namespace prime::shm::detail {
 // is freed, so an answer meant for a call that gave up never reaches a later one.
 
 inline constexpr std::uint64_t kServiceMagic = 0x5052494d45535633ull;  // "PRIMESV3"
-inline constexpr std::uint32_t kServiceLayout = 3;
+inline constexpr std::uint32_t kServiceLayout = 4;
 inline constexpr std::size_t kMaxCells = 256;
 inline constexpr std::size_t kPendingWords = kMaxCells / 64;
 inline constexpr std::size_t kMaxServiceClients = 128;
@@ -79,7 +80,6 @@ struct CellTail {
 
 struct alignas(64) ClientSlot {
   std::atomic<ParticipantId> owner{0};
-  std::atomic<std::uint64_t> calls{0};
   std::atomic<std::int64_t> last_request{0};  // steady_clock ticks
 };
 static_assert(sizeof(ClientSlot) == 64);
@@ -108,7 +108,6 @@ struct ServiceHeader {
   std::uint64_t cells_offset = 0;
 
   alignas(64) std::atomic<ParticipantId> server{0};
-  std::atomic<std::uint64_t> incarnation{0};  // servers it has had
   alignas(64) std::atomic<std::uint64_t> pending[kPendingWords]{};
   Doorbell requests;  // idle workers sleep here, one bit each
   // Counters, each on the line of whoever writes it, so counting costs no
@@ -135,5 +134,24 @@ struct ServiceGeometry {
   [[nodiscard]] constexpr std::size_t cells_offset() const { return round_up(sizeof(ServiceHeader), 64); }
   [[nodiscard]] constexpr std::size_t bytes() const { return cells_offset() + cell_count * cell_stride(); }
 };
+
+// What is wrong with a service's header against its `size`-byte segment;
+// empty when nothing is (as for a topic's: see damage(TopicHeader)).
+inline std::string damage(const ServiceHeader& h, std::size_t size) {
+  if (h.max_clients > kMaxServiceClients)
+    return std::to_string(h.max_clients) + " client slots, more than " + std::to_string(kMaxServiceClients);
+  if (h.calls_per_client > kMaxCells || h.max_clients * h.calls_per_client != h.cell_count || h.cell_count > kMaxCells)
+    return std::to_string(h.cell_count) + " cells for " + std::to_string(h.max_clients) + " clients of " +
+           std::to_string(h.calls_per_client) + " calls (at most " + std::to_string(kMaxCells) + ")";
+  constexpr std::uint64_t kBound = 1ull << 40;  // before the geometry adds them: no size wraps around
+  if (h.max_request_size >= kBound || h.max_reply_size >= kBound)
+    return "requests of " + std::to_string(h.max_request_size) + " bytes, replies of " + std::to_string(h.max_reply_size);
+  const ServiceGeometry g{h.max_request_size, h.max_reply_size, h.cell_count};
+  if (h.cell_stride != g.cell_stride() || h.request_offset != g.request_offset() || h.reply_offset != g.reply_offset() ||
+      h.tail_offset != g.tail_offset() || h.cells_offset != g.cells_offset())
+    return "a layout that does not follow from its message sizes and cells";
+  if (g.bytes() > size) return std::to_string(g.bytes()) + " bytes of layout in a segment of " + std::to_string(size);
+  return {};
+}
 
 }  // namespace prime::shm::detail

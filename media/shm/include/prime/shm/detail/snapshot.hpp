@@ -11,12 +11,29 @@
 
 namespace prime::shm::detail {
 
+// Topic or service `name` to look at, or null: a damaged one is passed
+// over (the rest of the domain is still shown), as one that is gone.
+inline std::shared_ptr<Topic> inspect_or_skip(const std::shared_ptr<Registry>& registry, const std::string& name) {
+  try {
+    return Topic::inspect(registry, name);
+  } catch (const Failure&) {
+    return nullptr;
+  }
+}
+inline std::shared_ptr<Service> open_or_skip(const std::shared_ptr<Registry>& registry, const std::string& name) {
+  try {
+    return Service::open_existing(registry, name);
+  } catch (const Failure&) {
+    return nullptr;
+  }
+}
+
 // What `registry`'s domain holds now: its participants, topics and services.
 inline RegistrySnapshot snapshot(const std::shared_ptr<Registry>& registry) {
   RegistrySnapshot s;
   s.participants = registry->participants();
   for (const auto& name : registry->topics()) {
-    auto topic = Topic::inspect(registry, name);
+    auto topic = inspect_or_skip(registry, name);
     if (!topic) continue;
     auto& h = topic->header();
     RegistrySnapshot::Topic t{name, h.type.describe(), topic->qos(), 0, {}, {}, h.head.load(), h.schema};
@@ -30,7 +47,7 @@ inline RegistrySnapshot snapshot(const std::shared_ptr<Registry>& registry) {
     s.topics.push_back(std::move(t));
   }
   for (const auto& name : registry->names(EndpointKind::service)) {
-    auto service = Service::open_existing(registry, name);
+    auto service = open_or_skip(registry, name);
     if (!service) continue;
     auto& h = service->header();
     RegistrySnapshot::Service v{name, h.request_type.describe(), h.reply_type.describe(), service->qos(), 0, {}, {},
@@ -54,9 +71,9 @@ inline std::size_t reclaim(const std::shared_ptr<Registry>& registry) {
   registry->forget_dead_participants();
   std::size_t freed = 0;
   for (const auto& name : registry->topics())
-    if (auto topic = Topic::inspect(registry, name)) freed += topic->reclaim_dead_subscribers();
+    if (auto topic = inspect_or_skip(registry, name)) freed += topic->reclaim_dead_subscribers();
   for (const auto& name : registry->names(EndpointKind::service))
-    if (auto service = Service::open_existing(registry, name)) freed += service->reclaim_dead_clients();
+    if (auto service = open_or_skip(registry, name)) freed += service->reclaim_dead_clients();
   return freed;
 }
 

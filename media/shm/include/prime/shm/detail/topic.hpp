@@ -45,12 +45,14 @@ class Topic {
   }
 
   // The topic `name` as it is, whatever its type, or null when it does not
-  // exist (or is not set up yet): for inspection.
+  // exist (or is not set up yet): for inspection. Throws Failure
+  // (Errc::type_mismatch) when its header is damaged.
   static std::shared_ptr<Topic> inspect(std::shared_ptr<Registry> registry, const std::string& name) {
     auto segment = Segment::open_existing(segment_name(registry->domain(), "topic", name));
     if (!segment || segment->size() < sizeof(TopicHeader)) return nullptr;
     const auto* header = std::launder(reinterpret_cast<const TopicHeader*>(segment->data()));
     if (header->magic.load(std::memory_order_acquire) != kTopicMagic || header->layout != kLayoutVersion) return nullptr;
+    refuse_damaged(name, *header, segment->size());
     return std::shared_ptr<Topic>{new Topic{std::move(registry), name, std::move(*segment)}};
   }
 
@@ -143,7 +145,12 @@ class Topic {
       throw Failure{{Errc::type_mismatch, "topic '" + name + "': made by another version of Prime (layout " +
                                               std::to_string(header->layout) + ", this one reads " +
                                               std::to_string(kLayoutVersion) + ")"}};
+    refuse_damaged(name, *header, size);
     return true;
+  }
+  static void refuse_damaged(const std::string& name, const TopicHeader& header, std::size_t size) {
+    if (const auto what = damage(header, size); !what.empty())
+      throw Failure{{Errc::type_mismatch, "topic '" + name + "': its shared memory is damaged (" + what + ")"}};
   }
 
   static void set_up(std::byte* data, const Fingerprint& type, const TopicQos& qos, const TopicGeometry& geometry,
