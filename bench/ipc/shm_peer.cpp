@@ -24,6 +24,8 @@
 //                    kBatch at once (loan_some), each with its sensor's
 //                    stamp; the parent takes every sample available, up to
 //                    kBatch, in one read_some.
+//   ShmViews         ShmBatch read in shm::Views batches (BatchReader):
+//                    each batch let go of at once, not view by view.
 #include <chrono>
 #include <cstdint>
 #include <optional>
@@ -225,5 +227,35 @@ void BM_Throughput_ShmBatch(benchmark::State& state) {
   });
 }
 BENCHMARK(BM_Throughput_ShmBatch)->Apply(ipc::throughput_payloads);
+
+// ShmBatch read with a BatchReader: each batch one shm::Views, let go of at once.
+void BM_Throughput_ShmViews(benchmark::State& state) {
+  ipc::run(state, [&](std::size_t bytes) {
+    const auto domain = ipc::new_shm_domain();
+    shm::Core core{domain};
+    auto in = core.subscribe<shm::Bytes>("stream", {}, batch_qos(bytes)).batches();
+    ipc::Link child{"Shm.stream_batches", bytes, {}, {domain}};
+    shm::Views<shm::Bytes> batch;
+    std::size_t next = 0;
+    child.set_drain([&] {
+      batch = {};
+      while (!in.try_read(kBatch).empty()) {
+      }
+    });
+    child.wait_ready();
+    child.go();
+    ipc::time_stream(state, [&](std::uint64_t seq) {
+      if (next == batch.size()) {  // all of the last batch read: let it go, take the next
+        batch = {};
+        next = 0;
+        ipc::spin_until(child, [&] { return !(batch = in.try_read(kBatch)).empty(); });
+      }
+      const auto got = ipc::seq_of(batch.bytes(next++).data());
+      if (got != seq) throw ipc::out_of_sequence(seq, got);
+    });
+    child.stop();
+  });
+}
+BENCHMARK(BM_Throughput_ShmViews)->Apply(ipc::throughput_payloads);
 
 }  // namespace

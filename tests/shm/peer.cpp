@@ -113,9 +113,17 @@ int main(int argc, char** argv) {
     say("loaned");
     forever();
   }
-  if (role == "hold" && argc == 6) {
-    auto reader = core.subscribe<std::uint64_t>(topic, {}, {.capacity = arg(4), .overflow = overflow_of(argv[5])})
-                      .subscribe();
+  if (role == "hold" && argc == 7) {  // argv[6]: one view ("view") or a batch of them ("views")
+    auto subscription = core.subscribe<std::uint64_t>(topic, {}, {.capacity = arg(4), .overflow = overflow_of(argv[5])});
+    if (std::string{argv[6]} == "views") {
+      auto batches = subscription.batches();
+      say("subscribed");
+      auto held = batches.read(arg(4), Clock::now() + 10s);
+      if (!held) fail(held.error().describe());
+      say("holding");
+      forever();
+    }
+    auto reader = subscription.subscribe();
     say("subscribed");
     auto held = reader.read_for(10s);
     if (!held) fail(held.error().describe());

@@ -83,13 +83,14 @@ TEST(ShmProcesses, APublisherKilledWhileChunksLeaveTheRingStrandsNone) {
   EXPECT_EQ(census.other, 0u) << "no chunk is left held by the dead publisher";
 }
 
-TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleDoesNotStallABlockPublisher) {
+// `how`: the holder takes one view ("view") or a batch the cursor keeps ("views").
+void expect_a_killed_holder_not_to_stall_a_block_publisher(const std::string& how) {
   const auto domain = unique_domain("killed-subscriber-block");
   shm::Core core{domain};
   const shm::TopicQos qos{.capacity = 4, .overflow = Overflow::block, .block_timeout = 30s};
   auto publisher = core.publisher<std::uint64_t>("cmds", qos);
   auto live = core.subscribe<std::uint64_t>("cmds", {}, qos).subscribe();
-  PeerProcess holder{{"hold", domain, "cmds", "4", "block"}};
+  PeerProcess holder{{"hold", domain, "cmds", "4", "block", how}};
   ASSERT_TRUE(holder.says("subscribed"));
   ASSERT_TRUE(publisher.publish(0));
   ASSERT_TRUE(holder.says("holding"));
@@ -108,11 +109,19 @@ TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleDoesNotStallABlockPublish
   EXPECT_EQ(core.registry().topics.at(0).subscriber_pids.size(), 1u) << "only the live subscriber is left";
 }
 
+TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleDoesNotStallABlockPublisher) {
+  expect_a_killed_holder_not_to_stall_a_block_publisher("view");
+}
+
+TEST(ShmProcesses, ASubscriberKilledWithABatchOutDoesNotStallABlockPublisher) {
+  expect_a_killed_holder_not_to_stall_a_block_publisher("views");
+}
+
 TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleLeavesADropOldestPublisherUnaffected) {
   const auto domain = unique_domain("killed-subscriber-drop");
   shm::Core core{domain};
   auto publisher = core.publisher<std::uint64_t>("scan", {.capacity = 4});  // drop_oldest
-  PeerProcess holder{{"hold", domain, "scan", "4", "drop"}};
+  PeerProcess holder{{"hold", domain, "scan", "4", "drop", "view"}};
   ASSERT_TRUE(holder.says("subscribed"));
   ASSERT_TRUE(publisher.publish(0));
   ASSERT_TRUE(holder.says("holding"));
@@ -166,16 +175,28 @@ TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwrite) { expect_no_t
 TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwriteToABatchReader) { expect_no_torn_sample(true); }
 
 // A publisher process runs `role` (sequence_publish or batch_publish): this
-// process reads 0..count-1 in batches and checks each.
-void expect_every_message_in_order(const std::string& role) {
+// process reads 0..count-1 in batches, of views (read_some) or as Views
+// (`views`), and checks each.
+void expect_every_message_in_order(const std::string& role, bool views = false) {
   const auto domain = unique_domain("sequence");
   shm::Core core{domain};
-  auto reader = core.subscribe<std::uint64_t>("seq", {}, kSequenceQos).subscribe();
+  auto topic = core.subscribe<std::uint64_t>("seq", {}, kSequenceQos);
+  auto reader = topic.subscribe();
+  auto batches = topic.batches();
   PeerProcess publisher{{role, domain, "seq", std::to_string(PRIME_SHM_SEQUENCE_COUNT)}};
   ASSERT_TRUE(publisher.says("ready"));
   std::uint64_t expected = 0, wrong = 0;
   std::vector<Sample<shm::View<std::uint64_t>>> batch;
   while (expected < PRIME_SHM_SEQUENCE_COUNT) {
+    if (views) {
+      auto got = batches.read(256, Clock::now() + 10s);
+      ASSERT_TRUE(got) << got.error().describe() << " after " << expected << " messages";
+      for (std::size_t i = 0; i < got->size(); ++i) {
+        if ((*got)[i] != expected || got->sequence(i) != expected) ++wrong;
+        ++expected;
+      }
+      continue;
+    }
     batch.clear();
     auto got = reader.read_some(batch, 256, Clock::now() + 10s);
     ASSERT_TRUE(got) << got.error().describe() << " after " << expected << " messages";
@@ -185,9 +206,9 @@ void expect_every_message_in_order(const std::string& role) {
     }
   }
   EXPECT_EQ(wrong, 0u);
-  EXPECT_EQ(reader.lost(), 0u);
+  EXPECT_EQ((views ? batches.lost() : reader.lost()), 0u);
   EXPECT_EQ(publisher.exit_code(), 0);
-  EXPECT_FALSE(reader.try_read()) << "nothing beyond the last message";
+  EXPECT_TRUE(views ? batches.try_read(1).empty() : !reader.try_read()) << "nothing beyond the last message";
 }
 
 TEST(ShmProcesses, BlockDeliversEveryMessageAcrossProcessesWithNoGapOrDuplicate) {
@@ -196,6 +217,10 @@ TEST(ShmProcesses, BlockDeliversEveryMessageAcrossProcessesWithNoGapOrDuplicate)
 
 TEST(ShmProcesses, BatchesOfEverySizeDeliverEveryMessageAcrossProcessesInOrder) {
   expect_every_message_in_order("batch_publish");
+}
+
+TEST(ShmProcesses, BatchesReadAsViewsDeliverEveryMessageAcrossProcessesInOrder) {
+  expect_every_message_in_order("batch_publish", true);
 }
 
 TEST(ShmProcesses, SegmentsLeftByADeadRunAreCleanedWhenTheDomainStarts) {

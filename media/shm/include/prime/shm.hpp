@@ -13,4 +13,5 @@
 #include "prime/shm/registry.hpp"
 #include "prime/shm/subscription.hpp"
 #include "prime/shm/view.hpp"
+#include "prime/shm/views.hpp"
 #include "prime/topology.hpp"

@@ -18,6 +18,7 @@
 #include "prime/shm/message.hpp"
 #include "prime/shm/qos.hpp"
 #include "prime/shm/view.hpp"
+#include "prime/shm/views.hpp"
 #include "prime/topology/concepts.hpp"
 #include "prime/topology/detail/runtime_state.hpp"
 #include "prime/topology/detail/wait.hpp"
@@ -83,12 +84,31 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     }
   }
 
+  // Up to `max` samples taken at once as a batch (Views), waiting as
+  // read_some does: at most what the budget has left.
+  std::expected<Views<T>, Error> read_views(std::size_t max, Clock::time_point deadline, std::stop_token stop) {
+    if (max == 0) return Views<T>{};
+    while (true) {
+      if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
+      if (auto views = take_views(max); !views.empty()) return views;
+    }
+  }
+  // What is published now, up to `max`: an empty batch when nothing is (or
+  // the budget is spent, which is reported once, as try_read does).
+  Views<T> try_read_views(std::size_t max) {
+    if (subscriber_->at_budget()) {
+      report_budget();
+      return {};
+    }
+    return take_views(max);
+  }
+
   // The newest sample: lets go of the one held first, so a collector costs
   // one sample of the budget, and skips what is older.
   void read_latest(std::optional<Sample<View<T>>>& latest) override {
     auto& cursor = subscriber_->cursor();
     if (!cursor.ready()) {
-      cursor.acknowledge();  // nothing new: the publisher may as well know it
+      cursor.acknowledge_all();  // nothing new: the publisher may as well know it
       return;
     }
     cursor.skip_to_newest();
@@ -99,6 +119,15 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   [[nodiscard]] std::uint64_t lost() const override { return subscriber_->cursor().lost(); }
 
  private:
+  Views<T> take_views(std::size_t max) {
+    const auto room = subscriber_->max_held() - std::min(subscriber_->held(), subscriber_->max_held());
+    const auto index = subscriber_->cursor().take_batch(std::min(max, room), subscriber_->held());
+    if (!index) return {};
+    subscriber_->hold_batch(subscriber_->cursor().batch(*index).chunks.size());
+    budget_reported_ = false;
+    return Views<T>{subscriber_.get(), *index};
+  }
+
   static Sample<View<T>> sample(View<T> view) {
     const auto stamp = view.stamp();
     return {std::move(view), stamp};
@@ -133,7 +162,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     auto stopped = [&] { return Error{Errc::stopped, "source '" + cursor.topic()->name() + "': stopped while waiting"}; };
     // What it has read is acknowledged before it waits: a `block` publisher
     // may be waiting for it.
-    if (subscriber_->at_budget() || !cursor.ready()) cursor.acknowledge();
+    if (subscriber_->at_budget() || !cursor.ready()) cursor.acknowledge_all();
     if (subscriber_->at_budget()) {
       auto room = [&] { return !subscriber_->at_budget(); };
       auto sleep = [&](Clock::time_point until) {
@@ -157,6 +186,29 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   std::shared_ptr<const void> feed_;
   bool budget_reported_ = false;
   std::vector<detail::Taken> taken_;  // read_some's scratch
+};
+
+// A subscriber that reads in batches (Views): the cheapest way to drain a
+// high-rate topic in place. It has its own cursor and slot of the topic,
+// like a Reader. Move-only; one thread at a time reads.
+template <Message T>
+class BatchReader {
+ public:
+  explicit BatchReader(std::unique_ptr<SubscriptionReader<T>> reader) : reader_{std::move(reader)} {}
+
+  // Up to `max` samples, once at least one is published; fails with
+  // Errc::timeout at `deadline`, Errc::stopped on a stop request, and
+  // Errc::limit_exceeded when the batches out hold max_held until then.
+  std::expected<Views<T>, Error> read(std::size_t max, Clock::time_point deadline, std::stop_token stop = {}) {
+    return reader_->read_views(max, deadline, std::move(stop));
+  }
+  // Up to `max` samples published now; empty when none is.
+  [[nodiscard]] Views<T> try_read(std::size_t max) { return reader_->try_read_views(max); }
+  // Samples overwritten before this reader took them (drop_oldest).
+  [[nodiscard]] std::uint64_t lost() const { return reader_->lost(); }
+
+ private:
+  std::unique_ptr<SubscriptionReader<T>> reader_;
 };
 
 // A topic seen as a source of the topology: `subscription | chain`,
@@ -188,6 +240,12 @@ class Subscription {
     auto own = state_->qos;
     own.spin = qos.spin;
     return Reader<View<T>>{std::make_unique<SubscriptionReader<T>>(state_->topic, own, state_->runtime, false, state_->feed)};
+  }
+
+  // A subscriber of its own that reads in batches.
+  [[nodiscard]] BatchReader<T> batches() const {
+    return BatchReader<T>{
+        std::make_unique<SubscriptionReader<T>>(state_->topic, state_->qos, state_->runtime, false, state_->feed)};
   }
 
   [[nodiscard]] const std::string& name() const noexcept { return state_->topic->name(); }

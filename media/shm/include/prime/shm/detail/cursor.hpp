@@ -26,15 +26,61 @@ struct Taken {
   std::uint64_t seq;
 };
 
+// Samples taken together for a batch of views (shm::Views): consecutive
+// sequences from `first`, let go of together.
+struct TakenBatch {
+  std::atomic<bool> out{false};  // its Views lives; cleared when it ends, on any thread
+  std::uint64_t first = 0;
+  std::vector<std::uint32_t> chunks;
+  // By the subscriber's bit, released when it ends; else by the cursor.
+  bool held = false;
+  // Held for it by a publisher that stopped waiting (taking thread only):
+  // released when its end is seen.
+  bool pinned = false;
+};
+
 // One subscriber slot's cursor over a topic.
 //
-// Not thread-safe: one thread at a time takes; releasing is thread-safe.
+// A taken sample's chunk is kept from reuse by the subscriber's bit in its
+// holders word (a hold), checked against the chunk's sequence. A batch of
+// views on a `block` topic needs none: the publisher overwrites no sample
+// a subscriber it waits for has not passed, and the cursor the publisher
+// sees stays at the first sample of the oldest such batch still out. Taking
+// one then writes nothing in shared memory, per sample or per batch.
+// - A subscriber joining, or waited for again after the publisher passed
+//   it over, is covered so from the head it sees after its cursor is
+//   stored (see Writer::slowest for why).
+// - Its batches kept so lie between the cursor it published and the end
+//   of the newest (kept_end, in its slot), a span that with its other
+//   holds stays within max_held: older batches are held (their bits set)
+//   before a new one would reach further. So a publisher that stops
+//   waiting for it (block_timeout) holds, for it, the chunks of that span
+//   (see Writer::give_up_on_laggards), within what the topic's memory is
+//   sized for; the subscriber keeps those of batches still out until they
+//   end, and lets go of the others.
+// Samples of a drop_oldest topic, and those the observer slot or a lagging
+// subscriber takes, are always held.
+//
+// Not thread-safe: one thread at a time takes; releasing and ending a batch
+// are thread-safe.
 class Cursor {
  public:
   // Takes a free subscriber slot, or (`observer`) the slot kept for tools,
-  // whose cursor no `block` publisher ever waits for.
-  Cursor(std::shared_ptr<Topic> topic, std::size_t history, bool observer = false) : topic_{std::move(topic)} {
+  // whose cursor no `block` publisher ever waits for. `views`: the views of
+  // each chunk this subscriber took one by one (Subscriber's): a take
+  // counts the first, and a chunk held for it while lagging is let go of
+  // once they are gone.
+  Cursor(std::shared_ptr<Topic> topic, std::size_t history, bool observer, std::atomic<std::uint32_t>* views)
+      : topic_{std::move(topic)}, views_{views} {
     auto& h = topic_->header();
+    by_cursor_ = !observer && static_cast<Overflow>(h.overflow) == Overflow::block;
+    max_held_ = h.max_held;
+    batches_ = std::vector<TakenBatch>(observer ? 1 : h.max_held);
+    for (std::uint32_t i = 0; i < batches_.size(); ++i) {
+      batches_[i].chunks.reserve(observer ? 1 : h.max_held);
+      free_.push_back(i);
+    }
+    live_.reserve(batches_.size());
     const auto me = topic_->registry().me();
     const auto first = observer ? kSlots - 1 : 0;
     const auto end = observer ? kSlots : h.max_subscribers;
@@ -55,6 +101,7 @@ class Cursor {
     bit_ = 1ull << slot_;
     topic_->release_subscriber_holds(slot_);  // nothing of an earlier owner lingers
     h.subscribers[slot_].lagging.store(0);
+    h.subscribers[slot_].kept_end.store(0);
     const auto head = h.head.load();
     const auto back = std::min<std::uint64_t>({history, h.capacity, head});
     next_ = head - back;
@@ -64,6 +111,7 @@ class Cursor {
     // (the destructor, or reclaim_subscriber) cleared it.
     if (!heavy_fences_allowed()) ask_for_full_fences(Clock::now());
     h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
+    covered_from_ = h.head.load(std::memory_order_seq_cst);
   }
   Cursor(const Cursor&) = delete;
   Cursor& operator=(const Cursor&) = delete;
@@ -73,6 +121,7 @@ class Cursor {
     // Views own the cursor jointly with the reader, so none is out by now.
     topic_->release_subscriber_holds(slot_);
     slot.lagging.store(0);
+    slot.kept_end.store(0);
     topic_->header().full_fences_wanted.fetch_and(~bit_);
     slot.owner.store(0);
     topic_->wake_publisher();
@@ -85,12 +134,13 @@ class Cursor {
   // entry (one cache line) when none is.
   std::optional<Taken> try_take() {
     auto& h = topic_->header();
+    retire_ended();
     while (true) {
       const auto entry = topic_->ring(next_).load(std::memory_order_acquire);
       const auto ahead = RingEntry::ahead(entry, next_);
       if (ahead < 0) {
         caught_up();
-        acknowledge();
+        acknowledge_all();
         return std::nullopt;
       }
       if (ahead == 0) {
@@ -99,18 +149,81 @@ class Cursor {
         __builtin_prefetch(topic_->payload(index));  // arrives while the hold is taken
         chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
         if (chunk.seq.load(std::memory_order_seq_cst) == next_) {
+          // No view of it is out: its hold was released before the
+          // publisher could publish it again, so no other thread touches
+          // its count now.
+          views_[index].store(1, std::memory_order_relaxed);
           const Taken taken{index, next_};
           advance(next_ + 1);
           return taken;
         }
         chunk.holders.fetch_and(~bit_);
       }
-      // Overwritten before we took it: lost to us. Skip to the oldest still
-      // in the ring.
-      const auto head = h.head.load(std::memory_order_acquire);
-      skip_to(std::max(next_ + 1, head > h.capacity ? head - h.capacity : 0));
+      skip_overwritten();
     }
   }
+
+  // Up to `max` samples as a batch (see TakenBatch): its index, for
+  // batch(); none when nothing is out (or a sample was lost: the next take
+  // goes on after it). In two passes, as take_some. `held`: the samples
+  // this subscriber has out now.
+  std::optional<std::uint32_t> take_batch(std::size_t max, std::size_t held) {
+    retire_ended();
+    if (max == 0 || free_.empty()) return std::nullopt;
+    const auto index = free_.back();
+    free_.pop_back();  // before anything retires more
+    auto& b = batches_[index];
+    b.chunks.clear();
+    max = std::min<std::size_t>(max, b.chunks.capacity());
+    while (true) {
+      for (auto seq = next_; seq - next_ < max; ++seq) {
+        const auto entry = topic_->ring(seq).load(std::memory_order_acquire);
+        const auto ahead = RingEntry::ahead(entry, seq);
+        if (ahead != 0) {
+          if (seq == next_ && ahead < 0) {  // nothing new
+            free_.push_back(index);
+            caught_up();
+            acknowledge_all();
+            return std::nullopt;
+          }
+          break;
+        }
+        const auto chunk = RingEntry::chunk(entry);
+        __builtin_prefetch(&topic_->chunk(chunk));  // its size and stamp, read for the view
+        __builtin_prefetch(topic_->payload(chunk));
+        b.chunks.push_back(chunk);
+      }
+      if (b.chunks.empty()) {
+        skip_overwritten();
+        continue;
+      }
+      if (may_cover(next_)) keep_within_reach(next_ + b.chunks.size(), held);
+      b.held = !covers(next_);  // after the ring entries' loads, and kept_end's store
+      if (!b.held) break;
+      for (std::size_t i = 0; i < b.chunks.size(); ++i) {
+        auto& chunk = topic_->chunk(b.chunks[i]);
+        chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
+        if (chunk.seq.load(std::memory_order_seq_cst) != next_ + i) {
+          chunk.holders.fetch_and(~bit_);
+          b.chunks.resize(i);  // later ones are not held yet
+          break;
+        }
+      }
+      if (!b.chunks.empty()) break;
+      skip_overwritten();
+    }
+    b.first = next_;
+    b.pinned = false;
+    b.out.store(true, std::memory_order_relaxed);
+    live_.push_back(index);
+    advance(next_ + b.chunks.size());
+    if (RingEntry::ahead(topic_->ring(next_).load(std::memory_order_acquire), next_) < 0) {
+      caught_up();
+      acknowledge();
+    }
+    return index;
+  }
+  [[nodiscard]] TakenBatch& batch(std::uint32_t index) noexcept { return batches_[index]; }
 
   // Up to `max` samples, appended to `out`, with one store of the cursor for
   // them all; how many. A sample overwritten before it was taken ends the
@@ -122,6 +235,7 @@ class Cursor {
   // not one after another, each hold waiting for its own.
   std::size_t take_some(std::size_t max, std::vector<Taken>& out) {
     if (max == 0) return 0;
+    retire_ended();
     const auto first = out.size();
     for (auto seq = next_; seq - next_ < max; ++seq) {
       const auto entry = topic_->ring(seq).load(std::memory_order_acquire);
@@ -139,6 +253,7 @@ class Cursor {
         out.resize(i);  // later ones are not held yet
         break;
       }
+      views_[out[i].chunk].store(1, std::memory_order_relaxed);
     }
     if (out.size() != first) {
       const auto seq = out.back().seq + 1;
@@ -193,12 +308,30 @@ class Cursor {
   // waits for that. A reader does so before it waits (for a sample or for
   // room in its budget), when it finds it has read everything, and every
   // ack_every_ samples in between.
+  // Not past the oldest batch still out that the cursor keeps.
   void acknowledge() noexcept {
-    if (acked_ == next_) return;
-    acked_ = next_;
+    retire_ended();
+    auto to = next_;
+    for (const auto i : live_)
+      if (kept_by_cursor(batches_[i])) {
+        to = std::min(to, batches_[i].first);
+        break;  // in the order taken: the oldest
+      }
+    if (acked_ == to) return;
+    acked_ = to;
     auto& h = topic_->header();
-    h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
-    if (next_ >= h.space_wanted.load(std::memory_order_seq_cst)) topic_->wake_publisher();
+    h.subscribers[slot_].cursor.store(to, std::memory_order_seq_cst);
+    if (to >= h.space_wanted.load(std::memory_order_seq_cst)) topic_->wake_publisher();
+  }
+
+  // The same, before the reader waits or when it finds nothing new: every
+  // batch out is held first, so the cursor reaches all it has read, and a
+  // `block` publisher is never held back by a reader waiting for more.
+  void acknowledge_all() noexcept {
+    retire_ended();
+    for (const auto i : live_)
+      if (kept_by_cursor(batches_[i])) hold(batches_[i]);
+    acknowledge();
   }
 
   [[nodiscard]] std::uint64_t lost() const noexcept { return lost_; }
@@ -209,6 +342,98 @@ class Cursor {
   void skip_to(std::uint64_t seq) {
     lost_ += seq - next_;
     advance(seq);
+  }
+  // The next sample was overwritten before it was taken: lost to us. Skip
+  // to the oldest still in the ring.
+  void skip_overwritten() {
+    auto& h = topic_->header();
+    const auto head = h.head.load(std::memory_order_acquire);
+    skip_to(std::max(next_ + 1, head > h.capacity ? head - h.capacity : 0));
+  }
+
+  // Whether a batch from `seq` is kept by the cursor: on a `block` topic,
+  // from where it covers samples, while the publisher waits for this
+  // subscriber. Called after the ring entries' (acquire) loads: a sample
+  // published after the publisher stopped waiting finds `lagging` set.
+  bool covers(std::uint64_t seq) {
+    if (!may_cover(seq)) return false;
+    const auto lagging = topic_->header().subscribers[slot_].lagging.load(std::memory_order_seq_cst);
+    if (lagging == kWaitedFor) return true;
+    if (lagging == kPassedOver && !passed_over_) sort_out_holds_for_lagging();
+    return false;
+  }
+  [[nodiscard]] bool may_cover(std::uint64_t seq) const noexcept { return by_cursor_ && seq >= covered_from_; }
+  // Before a batch the cursor is to keep is taken up to `end`, with `held`
+  // samples out: the span from the cursor the publisher sees to `end`
+  // (which a publisher that stops waiting holds for this subscriber), and
+  // the samples held by bits besides, stay within max_held (what the
+  // topic's memory is sized for). The cursor is moved on as far as the
+  // batches out allow, and the oldest are held until they do. Then `end`
+  // is published, before the look at `lagging` that decides the batch.
+  void keep_within_reach(std::uint64_t end, std::size_t held) {
+    // `held` was read before this counts the batches still out, so one
+    // ending meanwhile counts as held by a bit: too many, never too few.
+    auto over = [&] {
+      std::size_t kept = 0;
+      for (const auto i : live_)
+        if (kept_by_cursor(batches_[i]) && batches_[i].out.load(std::memory_order_acquire))
+          kept += batches_[i].chunks.size();
+      return end - acked_ + (held > kept ? held - kept : 0) > max_held_;
+    };
+    if (over()) acknowledge();
+    while (over()) {
+      const auto oldest = std::find_if(live_.begin(), live_.end(), [&](auto i) { return kept_by_cursor(batches_[i]); });
+      if (oldest == live_.end()) break;
+      hold(batches_[*oldest]);
+      acknowledge();
+    }
+    if (end > kept_end_) {
+      kept_end_ = end;
+      topic_->header().subscribers[slot_].kept_end.store(end, std::memory_order_seq_cst);
+    }
+  }
+  // A batch the cursor kept is held from now on (its holds go when it
+  // ends): the cursor may pass it. Its chunks cannot have been reused, the
+  // cursor the publisher sees being at or before its first sample.
+  void hold(TakenBatch& b) noexcept {
+    for (const auto c : b.chunks) topic_->chunk(c).holders.fetch_or(bit_, std::memory_order_seq_cst);
+    b.pinned = true;
+  }
+  static bool kept_by_cursor(const TakenBatch& b) noexcept { return !b.held && !b.pinned; }
+  // The publisher stopped waiting for this subscriber and held, for it,
+  // every chunk from its cursor on (before it set `lagging`). Those of
+  // batches still out are released when they end (even held ones: a hold
+  // may have gone just before the publisher's came); those of samples
+  // taken one by one, by their last view (or here, if it is gone); the
+  // rest, here. Once each time it is passed over.
+  void sort_out_holds_for_lagging() {
+    passed_over_ = true;
+    const auto count = topic_->header().chunk_count;
+    std::vector<bool> in_batch(count, false);
+    for (const auto i : live_) {
+      batches_[i].pinned = true;
+      for (const auto c : batches_[i].chunks) in_batch[c] = true;
+    }
+    for (std::uint32_t c = 0; c < count; ++c)
+      if (!in_batch[c] && (topic_->chunk(c).holders.load(std::memory_order_acquire) & bit_) != 0 &&
+          views_[c].load(std::memory_order_acquire) == 0)
+        release(c);
+  }
+  // Frees the slots of batches that ended (before any take: a pinned one's
+  // holds go first).
+  void retire_ended() noexcept {
+    std::size_t kept = 0;
+    for (const auto i : live_) {
+      auto& b = batches_[i];
+      if (b.out.load(std::memory_order_acquire)) {
+        live_[kept++] = i;
+        continue;
+      }
+      if (b.pinned)
+        for (const auto c : b.chunks) release(c);
+      free_.push_back(i);
+    }
+    live_.resize(kept);
   }
   // The cursor in shared memory follows in steps (acknowledge): one store
   // per step, not per sample, on the line the publisher reads to learn
@@ -259,12 +484,31 @@ class Cursor {
 
   // A subscriber the publisher stopped waiting for is waited for again once
   // it has read everything.
+  //
+  // A publisher that looked for the slowest cursor before `lagging` was
+  // cleared may overwrite what it had published then: the cursor covers
+  // samples from the head seen after (as at subscribe).
   void caught_up() {
-    auto& lagging = topic_->header().subscribers[slot_].lagging;
-    if (lagging.load(std::memory_order_relaxed) != 0) lagging.store(0);
+    auto& h = topic_->header();
+    auto& lagging = h.subscribers[slot_].lagging;
+    // Not while the publisher is still setting its holds: the next look.
+    if (lagging.load(std::memory_order_acquire) != kPassedOver) return;
+    if (!passed_over_) sort_out_holds_for_lagging();
+    lagging.store(0, std::memory_order_seq_cst);
+    covered_from_ = h.head.load(std::memory_order_seq_cst);
+    passed_over_ = false;
   }
 
   std::shared_ptr<Topic> topic_;
+  std::atomic<std::uint32_t>* views_;
+  std::vector<TakenBatch> batches_;  // one per sample of max_held at most
+  std::vector<std::uint32_t> free_;  // batches_ not out
+  std::vector<std::uint32_t> live_;  // batches_ out, or ended but not retired yet; in the order taken
+  bool by_cursor_ = false;           // a `block` topic's subscriber, not the observer
+  std::uint64_t max_held_ = 0;
+  std::uint64_t covered_from_ = 0;   // the first sample the cursor may keep
+  std::uint64_t kept_end_ = 0;       // the slot's kept_end, as last stored
+  bool passed_over_ = false;         // lagging seen, and the holds sorted out
   std::size_t slot_ = kNone;
   std::uint64_t bit_ = 0;
   std::uint64_t next_ = 0;

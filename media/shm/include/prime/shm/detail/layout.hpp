@@ -34,7 +34,7 @@ using ParticipantId = std::uint64_t;
 inline constexpr ParticipantId kReclaiming = ~0ull;  // a slot whose dead owner is being cleared
 
 inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;  // "PRIMESM4"
-inline constexpr std::uint32_t kLayoutVersion = 5;
+inline constexpr std::uint32_t kLayoutVersion = 6;
 // Room for a message type's description (prime::schema_of), for tools.
 inline constexpr std::size_t kSchemaCapacity = 2048;
 // Subscriber slots a topic may offer; one more is kept for tools that observe.
@@ -83,13 +83,23 @@ struct alignas(kPayloadAlignment) ChunkHeader {
 };
 static_assert(sizeof(ChunkHeader) == kPayloadAlignment, "a payload starts one cache line after its chunk");
 
+inline constexpr std::uint32_t kWaitedFor = 0;  // SubscriberSlot::lagging
+inline constexpr std::uint32_t kPinning = 1;
+inline constexpr std::uint32_t kPassedOver = 2;
+
 struct alignas(64) SubscriberSlot {
   std::atomic<ParticipantId> owner{0};
   std::atomic<std::uint64_t> cursor{kNoCursor};  // the next sequence it takes
-  // On a `block` topic: set when the publisher stopped waiting for this
-  // subscriber (it read nothing for block_timeout); it is then passed over
-  // like a drop_oldest reader, until it has caught up and clears this.
+  // On a `block` topic: kWaitedFor, or set when the publisher stopped
+  // waiting for this subscriber (it read nothing for block_timeout): it is
+  // then passed over like a drop_oldest reader, until it has caught up and
+  // clears this. kPinning while the publisher holds chunks for it (see
+  // Writer::give_up_on_laggards), then kPassedOver.
   std::atomic<std::uint32_t> lagging{0};
+  // The end of the newest batch its cursor keeps (Cursor::take_batch): the
+  // span from its cursor to here is what a publisher that stops waiting
+  // for it holds for it.
+  std::atomic<std::uint64_t> kept_end{0};
 };
 static_assert(sizeof(SubscriberSlot) == 64, "each subscriber's cursor on a line of its own");
 

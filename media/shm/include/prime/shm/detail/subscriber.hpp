@@ -42,19 +42,11 @@ class Subscriber {
   [[nodiscard]] std::size_t held() const noexcept { return refs_.load(std::memory_order_acquire) & kHeldMask; }
   [[nodiscard]] bool at_budget() const noexcept { return held() >= max_held_; }
 
-  // The first view of a chunk just taken. No view of it is out: its hold was
-  // released before the publisher could publish it again, so no other thread
-  // touches its count now.
-  void hold_taken(std::uint32_t chunk) noexcept {
-    views_[chunk].store(1, std::memory_order_relaxed);
-    refs_.fetch_add(1, std::memory_order_acq_rel);
-  }
+  // The first view of a chunk just taken (the cursor counted it).
+  void hold_taken(std::uint32_t) noexcept { refs_.fetch_add(1, std::memory_order_acq_rel); }
   // The first views of chunks just taken together: one read-modify-write
   // for them all.
-  void hold_taken(std::span<const Taken> taken) noexcept {
-    for (const auto& t : taken) views_[t.chunk].store(1, std::memory_order_relaxed);
-    refs_.fetch_add(taken.size(), std::memory_order_acq_rel);
-  }
+  void hold_taken(std::span<const Taken> taken) noexcept { refs_.fetch_add(taken.size(), std::memory_order_acq_rel); }
   // A copy of a view: the chunk is held already.
   void hold_again(std::uint32_t chunk) noexcept { views_[chunk].fetch_add(1, std::memory_order_relaxed); }
 
@@ -67,22 +59,21 @@ class Subscriber {
     else if (views.fetch_sub(1, std::memory_order_acq_rel) != 1)
       return;
     cursor_.release(chunk);
-    auto refs = refs_.load(std::memory_order_relaxed);
-    while (true) {
-      // Taking the reader below its budget while it is there: it may be
-      // waiting for room, so the chunk's share becomes a keeper's until the
-      // waiting reader has been rung.
-      const bool ring = (refs & kHeldMask) == max_held_ && refs > kHeldMask;
-      const auto next = refs - 1 + (ring ? kKeeper : 0);
-      if (!refs_.compare_exchange_weak(refs, next, std::memory_order_acq_rel, std::memory_order_relaxed)) continue;
-      if (!ring) {
-        if (next == 0) delete this;
-        return;
-      }
-      released_.ring();
-      end_share(kKeeper);
-      return;
-    }
+    let_go(1);
+  }
+
+  // A batch of `n` samples just taken (Cursor::take_batch): they count
+  // against the budget until it ends.
+  void hold_batch(std::size_t n) noexcept { refs_.fetch_add(n, std::memory_order_acq_rel); }
+  // A batch ends, on any thread: its holds go, if it has any; the cursor
+  // learns it is over (and frees its slot when it next looks).
+  void end_batch(std::uint32_t index) noexcept {
+    auto& batch = cursor_.batch(index);
+    const auto n = batch.chunks.size();
+    if (batch.held)
+      for (const auto chunk : batch.chunks) cursor_.release(chunk);
+    batch.out.store(false, std::memory_order_release);
+    let_go(n);
   }
 
   // Rung when a view's release takes the reader below its budget.
@@ -94,19 +85,40 @@ class Subscriber {
   static constexpr std::uint64_t kKeeper = 1ull << 32;
   static constexpr std::uint64_t kHeldMask = kKeeper - 1;
 
+  // `n` samples no longer count against the budget: the last share of a
+  // subscriber whose reader is gone ends it.
+  void let_go(std::uint64_t n) noexcept {
+    auto refs = refs_.load(std::memory_order_relaxed);
+    while (true) {
+      // Taking the reader below its budget while it is there: it may be
+      // waiting for room, so the share becomes a keeper's until the
+      // waiting reader has been rung.
+      const bool ring = (refs & kHeldMask) >= max_held_ && refs > kHeldMask;
+      const auto next = refs - n + (ring ? kKeeper : 0);
+      if (!refs_.compare_exchange_weak(refs, next, std::memory_order_acq_rel, std::memory_order_relaxed)) continue;
+      if (!ring) {
+        if (next == 0) delete this;
+        return;
+      }
+      released_.ring();
+      end_share(kKeeper);
+      return;
+    }
+  }
+
   Subscriber(std::shared_ptr<Topic> topic, std::size_t history, bool observer)
-      : cursor_{std::move(topic), history, observer},
-        max_held_{observer ? 1 : cursor_.topic()->header().max_held},
-        views_{std::make_unique<std::atomic<std::uint32_t>[]>(cursor_.topic()->header().chunk_count)} {}
+      : views_{std::make_unique<std::atomic<std::uint32_t>[]>(topic->header().chunk_count)},
+        cursor_{std::move(topic), history, observer, views_.get()},
+        max_held_{observer ? 1 : cursor_.topic()->header().max_held} {}
   ~Subscriber() = default;
 
   void end_share(std::uint64_t share) noexcept {
     if (refs_.fetch_sub(share, std::memory_order_acq_rel) == share) delete this;
   }
 
+  std::unique_ptr<std::atomic<std::uint32_t>[]> views_;  // of each chunk taken one by one
   Cursor cursor_;
   const std::size_t max_held_;
-  std::unique_ptr<std::atomic<std::uint32_t>[]> views_;
   std::atomic<std::uint64_t> refs_{kKeeper};  // the reader's
   Doorbell released_;  // in this process's memory: the futex works alike
 };

@@ -94,6 +94,7 @@ class Topic {
     release_subscriber_holds(i);
     slot.cursor.store(kNoCursor);
     slot.lagging.store(0);
+    slot.kept_end.store(0);
     header_->data.forget(1ull << i);  // it may have died asleep
     header_->full_fences_wanted.fetch_and(~(1ull << i));
     slot.owner.store(0);

@@ -317,13 +317,21 @@ class Writer {
 
   // The slowest cursor among subscribers this publisher waits for: not the
   // observer's, not those it gave up on, not those joining or gone.
+  //
+  // Fenced after the head store (a light publisher's is a release): a
+  // subscriber joining, or waited for again, stores its cursor and then
+  // reads the head, and lets its cursor keep only samples from there on
+  // (Cursor::covers). Either this look sees its cursor, or that read sees
+  // a head no earlier than this publisher's: nothing the cursor keeps is
+  // overwritten on the strength of a look that missed it.
   std::uint64_t slowest() const {
     auto& h = topic_->header();
+    std::atomic_thread_fence(std::memory_order_seq_cst);
     auto min = ~0ull;
     for (std::size_t i = 0; i < h.max_subscribers; ++i) {
       const auto& slot = h.subscribers[i];
       const auto cursor = slot.cursor.load(std::memory_order_acquire);
-      if (cursor < min && slot.lagging.load(std::memory_order_relaxed) == 0) min = cursor;
+      if (cursor < min && slot.lagging.load(std::memory_order_relaxed) == kWaitedFor) min = cursor;
     }
     return min;
   }
@@ -331,11 +339,26 @@ class Writer {
   // Every subscriber still short of `needed` read nothing for the block
   // timeout: reported once each, then passed over until it catches up (it
   // then loses what is overwritten before it reads it, and its lost() says so).
+  //
+  // Its cursor kept the batches it has out (Cursor) from being overwritten:
+  // from now on, its bit does, on the chunks from its cursor to its
+  // kept_end (where such batches lie). Both are read after `lagging` is
+  // set, so they are no earlier than any the subscriber stored before it
+  // last saw the flag clear; the holds are in place before the flag says
+  // kPassedOver, when the subscriber lets go of those it does not need.
   void give_up_on_laggards(std::uint64_t needed) {
     auto& h = topic_->header();
     for (std::size_t i = 0; i < h.max_subscribers; ++i) {
       auto& slot = h.subscribers[i];
-      if (slot.cursor.load() >= needed || slot.lagging.exchange(1) != 0) continue;
+      if (slot.cursor.load() >= needed || slot.lagging.load() != kWaitedFor) continue;
+      slot.lagging.store(kPinning, std::memory_order_seq_cst);
+      const auto from = slot.cursor.load(std::memory_order_seq_cst);
+      const auto to = slot.kept_end.load(std::memory_order_seq_cst);
+      if (from != kNoCursor)
+        for (auto seq = std::max(from, next_ > h.capacity ? next_ - h.capacity : 0); seq < std::min(to, next_); ++seq)
+          if (const auto chunk = in_ring_[topic_->ring_index(seq)]; chunk != kNoChunk)
+            topic_->chunk(chunk).holders.fetch_or(1ull << i, std::memory_order_seq_cst);
+      slot.lagging.store(kPassedOver, std::memory_order_seq_cst);
       if (report_)
         report_(Error{Errc::overflow, "topic '" + topic_->name() + "': subscriber " +
                                           topic_->registry().describe(slot.owner.load()) + " read nothing for " +
@@ -370,6 +393,11 @@ class Writer {
       }
     }
     h.head.store(last);
+    // A subscriber it died setting holds for sorts out the ones it set.
+    for (auto& slot : h.subscribers) {
+      auto pinning = kPinning;
+      slot.lagging.compare_exchange_strong(pinning, kPassedOver);
+    }
     h.space_wanted.store(~0ull);
     h.space.forget(kPublisherSleeper);  // it may have died asleep, waiting for room
   }
