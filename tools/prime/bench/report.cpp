@@ -346,6 +346,10 @@ std::string headline(const Results& r) {
   row("Shm lossless throughput in batches (loan_some / read_some), 64 B", r.find("ShmBatch", "throughput", 64, "rate"), true,
       {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
        {"Shm one at a time", r.find("Shm", "throughput", 64, "rate")}});
+  row("Shm lossless throughput in batches read as Views (loan_some / BatchReader), 64 B",
+      r.find("ShmViews", "throughput", 64, "rate"), true,
+      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
+       {"read_some", r.find("ShmBatch", "throughput", 64, "rate")}});
   row("Shm publish to 4 reader processes, 64 B (publisher's time per message)",
       r.find("Shm", "fanout-publish-4", 64, "publish"), false,
       {{"1 reader", r.find("Shm", "fanout-publish-1", 64, "publish")},

@@ -133,7 +133,6 @@ class Cursor {
   // The next sample, if one is published and unread. Looks at one ring
   // entry (one cache line) when none is.
   std::optional<Taken> try_take() {
-    auto& h = topic_->header();
     retire_ended();
     while (true) {
       const auto entry = topic_->ring(next_).load(std::memory_order_acquire);
