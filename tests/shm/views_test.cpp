@@ -198,9 +198,11 @@ TEST_F(ViewsTest, AStuckBatchIsPassedOverWithItsSamplesIntactAndNoHoldLeft) {
   EXPECT_EQ(batches.lost(), 1000u - 8 - 8);
 }
 
-// Batches out lie within max_held samples of the cursor the publisher sees
-// (older ones are held once a batch would reach further), so the max_held
-// chunks it holds for a reader it passes over cover all of them.
+// Batches out lie between the cursor the publisher sees and the reader's
+// kept_end, a span that with the reader's other holds stays within
+// max_held (older batches are held once a new one would reach further): so
+// the span a publisher holds for a reader it passes over covers all of
+// them, and fits the chunks the topic has for it.
 TEST_F(ViewsTest, BatchesOutStayWithinMaxHeldOfTheCursorSoAPassedOverReaderKeepsThemAll) {
   const shm::TopicQos qos{
       .capacity = 16, .overflow = Overflow::block, .block_timeout = 50ms, .max_subscribers = 1, .max_held = 4};

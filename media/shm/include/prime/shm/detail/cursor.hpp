@@ -75,12 +75,11 @@ class Cursor {
     auto& h = topic_->header();
     by_cursor_ = !observer && static_cast<Overflow>(h.overflow) == Overflow::block;
     max_held_ = h.max_held;
+    // As many batches as samples it may hold, each sized when taken.
     batches_ = std::vector<TakenBatch>(observer ? 1 : h.max_held);
-    for (std::uint32_t i = 0; i < batches_.size(); ++i) {
-      batches_[i].chunks.reserve(observer ? 1 : h.max_held);
-      free_.push_back(i);
-    }
+    for (std::uint32_t i = 0; i < batches_.size(); ++i) free_.push_back(i);
     live_.reserve(batches_.size());
+    in_batch_.resize(h.chunk_count);
     const auto me = topic_->registry().me();
     const auto first = observer ? kSlots - 1 : 0;
     const auto end = observer ? kSlots : h.max_subscribers;
@@ -170,10 +169,10 @@ class Cursor {
     retire_ended();
     if (max == 0 || free_.empty()) return std::nullopt;
     const auto index = free_.back();
-    free_.pop_back();  // before anything retires more
     auto& b = batches_[index];
     b.chunks.clear();
-    max = std::min<std::size_t>(max, b.chunks.capacity());
+    b.chunks.reserve(max);  // the one step that may throw: before anything is taken
+    free_.pop_back();       // before anything retires more
     while (true) {
       for (auto seq = next_; seq - next_ < max; ++seq) {
         const auto entry = topic_->ring(seq).load(std::memory_order_acquire);
@@ -400,21 +399,20 @@ class Cursor {
   }
   static bool kept_by_cursor(const TakenBatch& b) noexcept { return !b.held && !b.pinned; }
   // The publisher stopped waiting for this subscriber and held, for it,
-  // every chunk from its cursor on (before it set `lagging`). Those of
-  // batches still out are released when they end (even held ones: a hold
-  // may have gone just before the publisher's came); those of samples
-  // taken one by one, by their last view (or here, if it is gone); the
-  // rest, here. Once each time it is passed over.
-  void sort_out_holds_for_lagging() {
+  // the chunks from its cursor to its kept_end (before it said
+  // kPassedOver). Those of batches still out are released when they end
+  // (even held ones: a hold may have gone just before the publisher's
+  // came); those of samples taken one by one, by their last view (or here,
+  // if it is gone); the rest, here. Once each time it is passed over.
+  void sort_out_holds_for_lagging() noexcept {
     passed_over_ = true;
-    const auto count = topic_->header().chunk_count;
-    std::vector<bool> in_batch(count, false);
+    std::fill(in_batch_.begin(), in_batch_.end(), false);
     for (const auto i : live_) {
       batches_[i].pinned = true;
-      for (const auto c : batches_[i].chunks) in_batch[c] = true;
+      for (const auto c : batches_[i].chunks) in_batch_[c] = true;
     }
-    for (std::uint32_t c = 0; c < count; ++c)
-      if (!in_batch[c] && (topic_->chunk(c).holders.load(std::memory_order_acquire) & bit_) != 0 &&
+    for (std::uint32_t c = 0; c < in_batch_.size(); ++c)
+      if (!in_batch_[c] && (topic_->chunk(c).holders.load(std::memory_order_acquire) & bit_) != 0 &&
           views_[c].load(std::memory_order_acquire) == 0)
         release(c);
   }
@@ -503,6 +501,7 @@ class Cursor {
   std::vector<TakenBatch> batches_;  // one per sample of max_held at most
   std::vector<std::uint32_t> free_;  // batches_ not out
   std::vector<std::uint32_t> live_;  // batches_ out, or ended but not retired yet; in the order taken
+  std::vector<bool> in_batch_;       // sort_out_holds_for_lagging's, per chunk
   bool by_cursor_ = false;           // a `block` topic's subscriber, not the observer
   std::uint64_t max_held_ = 0;
   std::uint64_t covered_from_ = 0;   // the first sample the cursor may keep
