@@ -204,7 +204,8 @@ class BatchReader {
   }
   // Up to `max` samples published now; empty when none is.
   [[nodiscard]] Views<T> try_read(std::size_t max) { return reader_->try_read_views(max); }
-  // Samples overwritten before this reader took them (drop_oldest).
+  // Samples overwritten before this reader took them (drop_oldest, or
+  // while a `block` publisher passed it over).
   [[nodiscard]] std::uint64_t lost() const { return reader_->lost(); }
 
  private:
