@@ -24,21 +24,27 @@ namespace {
 using namespace std::chrono_literals;
 
 // The publisher's best time per message over batches of two kinds taken in
-// turn, so that a noisy machine slows both alike.
+// turn, so that a noisy machine slows both alike. Up to three rounds, until
+// one finds `a` within `ratio` of `b`: a machine busy elsewhere for a whole
+// round does not fail a test, a cost the fault adds fails every round.
 struct Costs {
   double a_ns = 1e300, b_ns = 1e300;
 };
 template <class A, class B>
-Costs compare(A a, B b, int batches = 7, int size = 20000) {
-  Costs costs;
+Costs compare(double ratio, A a, B b, int batches = 7, int size = 20000) {
   auto time = [&](auto& step) {
     const auto start = Clock::now();
     for (int i = 0; i < size; ++i) step();
     return std::chrono::duration<double, std::nano>(Clock::now() - start).count() / size;
   };
-  for (int k = 0; k < batches; ++k) {
-    costs.a_ns = std::min(costs.a_ns, time(a));
-    costs.b_ns = std::min(costs.b_ns, time(b));
+  Costs costs;
+  for (int round = 0; round < 3; ++round) {
+    costs = {};
+    for (int k = 0; k < batches; ++k) {
+      costs.a_ns = std::min(costs.a_ns, time(a));
+      costs.b_ns = std::min(costs.b_ns, time(b));
+    }
+    if (costs.a_ns <= ratio * costs.b_ns) break;
   }
   return costs;
 }
@@ -65,7 +71,7 @@ TEST(ShmPeerFaults, ASubscriberKilledAsleepCostsLaterPublishesNothing) {
   for (int i = 0; i < 100000; ++i) ASSERT_TRUE(publisher.publish(n++));
   EXPECT_LT(shm::detail::futex_syscalls.load() - calls, 100u) << "system calls in 100,000 publishes after the sleeper died";
 
-  const auto costs = compare([&] { (void)publisher.publish(n++); }, [&] { (void)untouched.publish(n++); });
+  const auto costs = compare(1.2, [&] { (void)publisher.publish(n++); }, [&] { (void)untouched.publish(n++); });
   if (kTimingMeansSomething) {
     EXPECT_LE(costs.a_ns, 1.2 * costs.b_ns) << costs.a_ns << " ns per message where a sleeper died, " << costs.b_ns
                                             << " where none ever slept";
@@ -99,6 +105,7 @@ TEST(ShmPeerFaults, ABlockPublisherKilledAsleepCostsItsSuccessorNothing) {
   EXPECT_LT(shm::detail::futex_syscalls.load() - calls, 100u) << "system calls in 100,000 messages after the publisher died asleep";
 
   const auto costs = compare(
+      1.2,
       [&] {
         (void)successor.publish(n++);
         (void)reader.try_read();
@@ -114,7 +121,7 @@ TEST(ShmPeerFaults, ABlockPublisherKilledAsleepCostsItsSuccessorNothing) {
 }
 
 TEST(ShmPeerFaults, AStuckSubscriberIsReportedOnceAndNoLongerWaitedFor) {
-  constexpr std::uint64_t kTotal = 400000;
+  constexpr std::uint64_t kTotal = 500000;  // more than three rounds of the comparison below publish
   const auto domain = unique_domain("stuck");
   shm::Core core{domain};
   const shm::TopicQos qos{.capacity = 64, .overflow = Overflow::block, .block_timeout = 200ms};
@@ -145,7 +152,7 @@ TEST(ShmPeerFaults, AStuckSubscriberIsReportedOnceAndNoLongerWaitedFor) {
 
   // After the report the stuck reader is passed over: "cmds" runs as fast
   // as "twin", whose publisher never had anyone to wait for.
-  const auto costs = compare([&] { EXPECT_TRUE(publisher.publish(n++)); },
+  const auto costs = compare(2, [&] { EXPECT_TRUE(publisher.publish(n++)); },
                              [&] { EXPECT_TRUE(twin_publisher.publish(m++)); }, 15, 10000);
   ASSERT_LT(n, kTotal);
   if (kTimingMeansSomething) {
