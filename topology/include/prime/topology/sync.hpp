@@ -121,6 +121,7 @@ class Synchronizer {
   using Tuple = Synced<Ts...>;
   static constexpr std::size_t kInputs = sizeof...(Ts);
   static_assert(kInputs <= kMaxSyncInputs, "prime::sync takes at most kMaxSyncInputs sources");
+  static_assert(kMaxSyncInputs <= ApproximateMatch::kMaxInputs);
 
   // `depths`: how many values of each input may wait for a match.
   Synchronizer(SyncPolicy policy, std::array<std::size_t, kInputs> depths, LocalSource<Tuple> out)
@@ -194,11 +195,9 @@ class Synchronizer {
   template <std::size_t... I>
   void publish_approximate(std::stop_token& stop, std::index_sequence<I...>) {
     while (true) {
-      std::array<std::vector<Clock::time_point>, kInputs> stamps;
-      ((stamps[I] = stamps_of(std::get<I>(queues_))), ...);
-      const std::vector<std::span<const Clock::time_point>> spans{std::span<const Clock::time_point>{stamps[I]}...};
-      const auto match = match_approximate(spans, {earliest_next_.begin(), earliest_next_.end()}, policy_.max_span,
-                                           policy_.age_penalty);
+      ((stamps_of(std::get<I>(queues_), stamps_[I])), ...);
+      const std::array<std::span<const Clock::time_point>, kInputs> spans{std::span<const Clock::time_point>{stamps_[I]}...};
+      const auto match = match_approximate(spans, earliest_next_, policy_.max_span, policy_.age_penalty);
       if (match.kind == ApproximateMatch::Kind::wait) return;
       if (match.kind == ApproximateMatch::Kind::drop_oldest) {
         ((I == match.input ? std::get<I>(queues_).pop_front() : void()), ...);
@@ -211,12 +210,11 @@ class Synchronizer {
     }
   }
 
+  // The queue's stamps into `stamps`, whose memory stays for the next time.
   template <class Q>
-  static std::vector<Clock::time_point> stamps_of(const Q& queue) {
-    std::vector<Clock::time_point> stamps;
-    stamps.reserve(queue.size());
+  static void stamps_of(const Q& queue, std::vector<Clock::time_point>& stamps) {
+    stamps.clear();
     for (const auto& s : queue) stamps.push_back(s.stamp);
-    return stamps;
   }
   template <class Q>
   static void drop_front(Q& queue, std::size_t n) {
@@ -243,6 +241,7 @@ class Synchronizer {
   std::tuple<std::deque<Sample<Ts>>...> queues_;
   std::array<Clock::time_point, kInputs> earliest_next_{};  // where each input's next value could lie at the earliest
   std::array<Clock::time_point, kInputs> taken_{};          // the stamps of the set being made
+  std::array<std::vector<Clock::time_point>, kInputs> stamps_;  // approximate_time: each queue's stamps, for the matcher
 };
 
 // A sync of sources whose values pin memory (a shared-memory topic's views

@@ -1,11 +1,11 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstddef>
 #include <optional>
 #include <span>
 #include <utility>
-#include <vector>
 
 #include "prime/logic/sample.hpp"
 
@@ -35,16 +35,20 @@ namespace prime::detail {
 // by p × how much later it starts to win, and the matcher stops waiting
 // for one sooner. With p = 0 (the default) the sets are the least-span ones.
 struct ApproximateMatch {
+  static constexpr std::size_t kMaxInputs = 8;
   enum class Kind { wait, make, drop_oldest };
   Kind kind = Kind::wait;
-  std::vector<std::size_t> picks{};  // make: the value each input gives, as an index into its queue
-  std::size_t input = 0;             // drop_oldest: whose head no set within max_span can hold
+  std::array<std::size_t, kMaxInputs> picks{};  // make: the value each input gives, as an index into its queue
+  std::size_t input = 0;                        // drop_oldest: whose head no set within max_span can hold
 };
 
-// `queues`: each input's stamps not yet used or dropped, oldest first;
-// `earliest_next`: where each input's next value could lie at the earliest.
-inline ApproximateMatch match_approximate(const std::vector<std::span<const Clock::time_point>>& queues,
-                                          const std::vector<Clock::time_point>& earliest_next, Clock::duration max_span,
+// `queues`: each input's stamps not yet used or dropped, oldest first (at
+// most kMaxInputs inputs); `earliest_next`: where each input's next value
+// could lie at the earliest. Allocates nothing: it runs on every value a
+// sync's input offers. Every walk below moves forward only, as the stamps
+// it looks for rise.
+inline ApproximateMatch match_approximate(std::span<const std::span<const Clock::time_point>> queues,
+                                          std::span<const Clock::time_point> earliest_next, Clock::duration max_span,
                                           double age_penalty = 0) {
   const auto n = queues.size();
   for (const auto& q : queues)
@@ -57,10 +61,15 @@ inline ApproximateMatch match_approximate(const std::vector<std::span<const Cloc
     if (age_penalty == 0) return span;
     return span + Clock::duration{static_cast<Clock::rep>(age_penalty * static_cast<double>((start - newest_head).count()))};
   };
+  using Indices = std::array<std::size_t, ApproximateMatch::kMaxInputs>;
+  // Moves `at` on to input i's first value at or after `t` (t never falls).
+  auto first_from = [&](std::size_t i, std::size_t& at, Clock::time_point t) {
+    while (at < queues[i].size() && queues[i][at] < t) ++at;
+  };
 
   std::optional<Clock::duration> best_cost;  // the best candidate whose values are all here
   Clock::time_point best_start{};
-  std::vector<std::size_t> best;
+  Indices best{};
   // The best a candidate still waiting for a value could be: (least cost, earliest start).
   std::optional<std::pair<Clock::duration, Clock::time_point>> open;
   auto consider_open = [&](Clock::duration least_span, Clock::duration least_cost, Clock::time_point start) {
@@ -69,20 +78,21 @@ inline ApproximateMatch match_approximate(const std::vector<std::span<const Cloc
       open = {least_cost, start};
   };
 
-  std::vector<std::size_t> picks(n);
+  Indices picks{};
   for (std::size_t s = 0; s < n; ++s) {
+    Indices at{};
     for (const auto m : queues[s]) {
       if (m > newest_head) break;
       auto newest = m;
       bool complete = true;
       for (std::size_t i = 0; i < n; ++i) {
-        const auto at = std::lower_bound(queues[i].begin(), queues[i].end(), m);
-        if (at == queues[i].end()) {
+        first_from(i, at[i], m);
+        if (at[i] == queues[i].size()) {
           complete = false;
           newest = std::max(newest, earliest_next[i]);  // newest >= m already
         } else {
-          picks[i] = static_cast<std::size_t>(at - queues[i].begin());
-          newest = std::max(newest, *at);
+          picks[i] = at[i];
+          newest = std::max(newest, queues[i][at[i]]);
         }
       }
       const auto span = newest - m;
@@ -101,35 +111,42 @@ inline ApproximateMatch match_approximate(const std::vector<std::span<const Cloc
   // that lie here, every other input's pick (its first value at or after
   // the start, or its earliest next) stays the same while the start grows,
   // so the span is least at the end of each such stretch; the cost, linear
-  // in the start there, is least at one end or the other.
-  std::vector<Clock::time_point> ends;
+  // in the start there, is least at one end or the other. The stretches end
+  // at e_i, then at every stamp here after it up to B, in order (the
+  // queues merged as they are walked).
   for (std::size_t i = 0; i < n; ++i) {
-    if (earliest_next[i] > newest_head) continue;
-    ends.clear();
-    for (const auto& q : queues)
-      for (const auto t : q)
-        if (t > earliest_next[i] && t <= newest_head) ends.push_back(t);
-    ends.push_back(earliest_next[i]);
-    std::sort(ends.begin(), ends.end());
-    auto from = earliest_next[i];  // the stretch's first possible start (for ties: the most threatening)
-    for (const auto end : ends) {
+    const auto e = earliest_next[i];
+    if (e > newest_head) continue;
+    Indices merged{}, pick{};
+    for (std::size_t k = 0; k < n; ++k)
+      while (merged[k] < queues[k].size() && queues[k][merged[k]] <= e) ++merged[k];
+    auto from = e;  // the stretch's first possible start (for ties: the most threatening)
+    for (auto end = e;;) {
       // For a start t in the stretch the set's newest stamp is max(t, others).
       auto others = Clock::time_point::min();
       for (std::size_t k = 0; k < n; ++k) {
         if (k == i) continue;
-        const auto at = std::lower_bound(queues[k].begin(), queues[k].end(), end);
-        others = std::max(others, at == queues[k].end() ? earliest_next[k] : *at);
+        first_from(k, pick[k], end);
+        others = std::max(others, pick[k] == queues[k].size() ? earliest_next[k] : queues[k][pick[k]]);
       }
       const auto span_at = [&](Clock::time_point t) { return std::max(t, others) - t; };
       consider_open(span_at(end), std::min(cost(span_at(end), end), cost(span_at(from), from)), from);
       from = end;
+      // The next stretch ends at the oldest stamp not walked yet, if it is at most B.
+      std::size_t next = n;
+      for (std::size_t k = 0; k < n; ++k)
+        if (merged[k] < queues[k].size() && queues[k][merged[k]] <= newest_head &&
+            (next == n || queues[k][merged[k]] < queues[next][merged[next]]))
+          next = k;
+      if (next == n) break;
+      end = queues[next][merged[next]++];
     }
   }
 
   if (best_cost) {
     const bool may_be_beaten = open && (open->first < *best_cost || (open->first == *best_cost && open->second < best_start));
     if (may_be_beaten) return {};
-    return {ApproximateMatch::Kind::make, std::move(best)};
+    return {ApproximateMatch::Kind::make, best};
   }
   if (open) return {};  // a set within max_span may still come
   // None can: the oldest head can never be in a set (any set holding it
