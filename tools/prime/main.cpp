@@ -4,7 +4,8 @@
 //   prime bench [--quick] [--out DIR]     what each hop costs: a report folder
 //
 // Shm domains (the default; --domain, or PRIME_DOMAIN, or "robot") and
-// Optimus domains (--redis tcp://host:port, with --domain as the key prefix).
+// Optimus domains (--redis tcp://host:port or unix:///path, with --domain as
+// the key prefix).
 // Exit codes: 0 done, 1 failed, 2 wrong usage, 3 no such domain, topic or
 // service, 4 nothing arrived in time, 5 Redis unreachable.
 #include <CLI/CLI.hpp>
@@ -50,7 +51,7 @@ int main(int argc, char** argv) {
   Options o;
   if (const char* env = std::getenv("PRIME_DOMAIN"); env && *env) o.domain = env;
   app.add_option("--domain", o.domain, "the domain (default: $PRIME_DOMAIN, or robot)");
-  app.add_option("--redis", o.redis, "look at an Optimus domain on this Redis server (tcp://host:port) instead");
+  app.add_option("--redis", o.redis, "look at an Optimus domain on this Redis server (tcp://host:port or unix:///path) instead");
   app.add_flag("--json", o.json, "one JSON document (listings) or one per line (streams), for scripts");
   std::function<int()> run;
   const bool redis = [&] {

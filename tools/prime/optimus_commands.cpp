@@ -1,7 +1,5 @@
 // `prime --redis URL` on Optimus domains: their sources (Redis streams) and
 // services, as the registry hashes of the domain list them.
-#include <hiredis/hiredis.h>
-
 #include <chrono>
 #include <iostream>
 #include <map>
@@ -9,12 +7,14 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "json.hpp"
 #include "message_text.hpp"
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
+#include "prime/optimus/detail/connection.hpp"
 #include "prime/optimus/detail/stream_protocol.hpp"
 #include "shm_commands.hpp"
 #include "stats.hpp"
@@ -24,41 +24,32 @@ namespace prime::tool {
 
 namespace {
 
-// One connection to the server, for the tool's few commands.
+// One connection to the server, as Optimus opens its own (tcp:// or
+// unix://, the same errors), for the tool's few commands.
 class Redis {
  public:
-  explicit Redis(const std::string& url) {
-    auto rest = url.starts_with("tcp://") ? url.substr(6) : url;
-    const auto colon = rest.rfind(':');
-    const auto host = colon == std::string::npos ? rest : rest.substr(0, colon);
-    const int port = colon == std::string::npos ? 6379 : std::stoi(rest.substr(colon + 1));
-    const timeval timeout{1, 0};
-    context_.reset(redisConnectWithTimeout(host.c_str(), port, timeout));
-    if (!context_ || context_->err)
-      throw Failure{{Errc::unreachable, "redis at " + url + " is unreachable" +
-                                            (context_ ? std::string{": "} + context_->errstr : std::string{})}};
-  }
+  explicit Redis(const std::string& url) : connection_{open(url)} {}
 
   // The reply to `words`, or a Failure naming what went wrong.
-  std::unique_ptr<redisReply, void (*)(void*)> command(const std::vector<std::string>& words) {
-    std::vector<const char*> argv;
-    std::vector<std::size_t> lengths;
-    for (const auto& w : words) {
-      argv.push_back(w.data());
-      lengths.push_back(w.size());
-    }
-    auto* reply = static_cast<redisReply*>(redisCommandArgv(context_.get(), static_cast<int>(argv.size()), argv.data(), lengths.data()));
-    if (!reply) throw Failure{{Errc::unreachable, "redis: " + std::string{context_->errstr}}};
-    if (reply->type == REDIS_REPLY_ERROR) {
-      std::string message{reply->str, reply->len};
-      freeReplyObject(reply);
-      throw Failure{{Errc::unreachable, "redis: " + message}};
-    }
-    return {reply, freeReplyObject};
+  prime::optimus::detail::Reply command(const std::vector<std::string>& words) {
+    const std::vector<std::string_view> args(words.begin(), words.end());
+    auto reply = connection_.command(args);
+    if (!reply) throw Failure{reply.error()};
+    if ((*reply)->type == REDIS_REPLY_ERROR)
+      throw Failure{{Errc::unreachable, "redis: " + std::string{(*reply)->str, (*reply)->len}}};
+    return std::move(*reply);
   }
 
  private:
-  std::unique_ptr<redisContext, void (*)(redisContext*)> context_{nullptr, redisFree};
+  static prime::optimus::detail::Connection open(const std::string& url) {
+    const auto endpoint = prime::optimus::detail::parse_url(url);
+    if (!endpoint) throw Failure{endpoint.error()};
+    auto connection = prime::optimus::detail::Connection::open({.url = url}, *endpoint);
+    if (!connection) throw Failure{connection.error()};
+    return std::move(*connection);
+  }
+
+  prime::optimus::detail::Connection connection_;
 };
 
 std::map<std::string, std::string> hash(Redis& r, const std::string& key) {
