@@ -1,5 +1,6 @@
-// `prime bench`: every benchmark suite, one benchmark per process run, with
-// progress on stderr, into a report folder (report.hpp says what is in it).
+// `prime bench`: every benchmark suite, one benchmark per process run (a
+// full run: each in rounds), with progress on stderr, into a report folder
+// (report.hpp says what is in it).
 #include "command.hpp"
 
 #include <unistd.h>
@@ -125,19 +126,15 @@ std::vector<std::string> list(const Suite& suite, const std::filesystem::path& b
   return names;
 }
 
-// Runs one benchmark and adds what it measured, or why it could not.
+// Runs one benchmark once and adds what it measured, or why it could not.
+// `json`: where its own report goes.
 void run_one(const Suite& suite, const std::filesystem::path& binary, const std::string& benchmark, bool quick,
-             const std::filesystem::path& raw, std::size_t index, Progress& progress, Results& results) {
-  const auto json = raw / (suite.name + "-" + std::to_string(index) + ".json");
+             const std::filesystem::path& raw, const std::filesystem::path& json, Progress& progress, Results& results) {
   std::vector<std::string> argv{binary.string(),
                                 "--benchmark_filter=" + regex_quoted(benchmark),
                                 "--benchmark_min_time=" + std::to_string(quick ? suite.quick_min_time : suite.full_min_time),
                                 "--benchmark_out=" + json.string(),
                                 "--benchmark_out_format=json"};
-  if (!quick) {
-    argv.push_back("--benchmark_repetitions=" + std::to_string(suite.full_repetitions));
-    argv.push_back("--benchmark_report_aggregates_only=true");
-  }
   auto skip = [&](const std::string& why) { results.skipped.push_back({suite.name, benchmark, why}); };
   Finished finished;
   try {
@@ -163,28 +160,48 @@ void run_one(const Suite& suite, const std::filesystem::path& binary, const std:
   const auto runs = object.find("benchmarks");
   if (runs == object.end() || !runs->second.is_array() || runs->second.array().empty())
     return skip("reported nothing (see raw/" + suite.name + ".log)");
-  // The median of the repetitions, or the only run.
-  const Json* chosen = nullptr;
-  for (const auto& run : runs->second.array()) {
-    const auto& fields = run.object();
-    if (const auto error = fields.find("error_occurred");
-        error != fields.end() && std::holds_alternative<bool>(error->second.value) && std::get<bool>(error->second.value)) {
-      const auto message = fields.find("error_message");
-      return skip(message != fields.end() && std::holds_alternative<std::string>(message->second.value)
-                      ? std::get<std::string>(message->second.value)
-                      : "failed");
-    }
-    const auto aggregate = fields.find("aggregate_name");
-    const bool is_aggregate = aggregate != fields.end();
-    if (!is_aggregate && !chosen) chosen = &run;
-    if (is_aggregate && std::holds_alternative<std::string>(aggregate->second.value) &&
-        std::get<std::string>(aggregate->second.value) == "median")
-      chosen = &run;
+  const auto& run = runs->second.array().front();
+  const auto& fields = run.object();
+  if (const auto error = fields.find("error_occurred");
+      error != fields.end() && std::holds_alternative<bool>(error->second.value) && std::get<bool>(error->second.value)) {
+    const auto message = fields.find("error_message");
+    return skip(message != fields.end() && std::holds_alternative<std::string>(message->second.value)
+                    ? std::get<std::string>(message->second.value)
+                    : "failed");
   }
-  if (!chosen) chosen = &runs->second.array().back();
   const auto before = results.figures.size();
-  suite.read(*chosen, results);
+  suite.read(run, results);
   if (results.figures.size() == before) skip("its result has no figure this report knows");
+}
+
+// Each figure as the median of its rounds' values (the middle one, or the
+// lower of the two middle ones), in the order first measured; each skip once.
+Results medians(const Results& rounds) {
+  Results out;
+  std::vector<std::vector<double>> values;
+  for (const auto& f : rounds.figures) {
+    const auto same = [&](const Figure& g) {
+      return g.who == f.who && g.scenario == f.scenario && g.payload == f.payload && g.statistic == f.statistic;
+    };
+    const auto at = std::find_if(out.figures.begin(), out.figures.end(), same);
+    if (at == out.figures.end()) {
+      out.figures.push_back(f);
+      values.push_back({f.value});
+    } else {
+      values[static_cast<std::size_t>(at - out.figures.begin())].push_back(f.value);
+    }
+  }
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    auto& v = values[i];
+    const auto middle = v.begin() + static_cast<long>((v.size() - 1) / 2);
+    std::nth_element(v.begin(), middle, v.end());
+    out.figures[i].value = *middle;
+  }
+  for (const auto& s : rounds.skipped)
+    if (std::none_of(out.skipped.begin(), out.skipped.end(),
+                     [&](const Skipped& t) { return t.suite == s.suite && t.benchmark == s.benchmark; }))
+      out.skipped.push_back(s);
+  return out;
 }
 
 }  // namespace
@@ -214,15 +231,32 @@ int run(const Options& options) {
 
   std::cerr << "prime bench: " << plan.size() << " benchmarks" << (options.quick ? " (quick)" : "") << " on " << machine.cpu
             << ", " << machine.cpus << " CPUs; report in " << out.string() << '\n';
-  Progress progress{plan.size()};
-  for (std::size_t i = 0; i < plan.size() && !interrupted; ++i) {
+  // A full run takes each benchmark's repetitions in rounds over the whole
+  // plan, not one after another: so a figure, and the floor or peer it is
+  // compared with, were measured across the same stretch of whatever else
+  // the machine was doing, and their medians compare.
+  std::vector<std::pair<int, std::size_t>> runs;  // (round, plan index)
+  int rounds = 1;
+  if (!options.quick)
+    for (const auto& [suite, benchmark] : plan) rounds = std::max(rounds, suite->full_repetitions);
+  for (int round = 0; round < rounds; ++round)
+    for (std::size_t i = 0; i < plan.size(); ++i)
+      if (round == 0 || round < plan[i].suite->full_repetitions) runs.emplace_back(round, i);
+  Progress progress{runs.size()};
+  Results measured;
+  for (std::size_t k = 0; k < runs.size() && !interrupted; ++k) {
+    const auto [round, i] = runs[k];
     const auto& [suite, benchmark] = plan[i];
-    progress.start(i, suite->name, benchmark);
+    progress.start(k, suite->name, benchmark);
     const auto t = Clock::now();
-    run_one(*suite, bin_dir / suite->binary, benchmark, options.quick, raw, i, progress, results);
+    const auto json = raw / (suite->name + "-" + std::to_string(i) + (rounds > 1 ? "-" + std::to_string(round + 1) : "") + ".json");
+    run_one(*suite, bin_dir / suite->binary, benchmark, options.quick, raw, json, progress, measured);
     progress.finish(Clock::now() - t);
   }
   progress.end();
+  auto medians_measured = medians(measured);
+  results.figures = std::move(medians_measured.figures);
+  results.skipped.insert(results.skipped.end(), medians_measured.skipped.begin(), medians_measured.skipped.end());
 
   const RunInfo info{.quick = options.quick,
                      .interrupted = interrupted.load(),

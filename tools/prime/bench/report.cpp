@@ -413,7 +413,9 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
      << " benchmarks in " << minutes << " min " << seconds << " s" << (info.interrupted ? ", INTERRUPTED (partial)" : "")
      << ". Reproduce with `prime bench" << (info.quick ? " --quick" : "") << "`.\n\n"
      << (info.quick ? "Each figure is from one short run (noisy: use the full run for numbers to quote). "
-                    : "Each figure is the median of 3 runs (the availability tests, of fixed length, run once). ")
+                    : "Each figure is the median of 3 runs, taken in three rounds over every benchmark, so that a "
+                      "figure and the floor or peer it is compared with were measured across the same stretch of the "
+                      "machine's load (the availability tests, of fixed length, run once, in the first round). ")
      << "Latency is one way (half a round trip); its percentiles come from every round trip's own timing. "
         "Every ratio compares figures of this one run: the machine is shared and noisy, so compare ratios, not "
         "absolute times, between runs. Cells: p50 / p99.\n\n"

@@ -23,15 +23,15 @@ struct Suite {
   std::string full_filter = ".";    // and in the full one: everything, unless said
   double quick_min_time = 0.05;     // seconds per benchmark
   double full_min_time = 0.2;
-  int full_repetitions = 3;         // the quick mode runs once
+  int full_repetitions = 3;         // runs of each in the full mode, one per round; the quick mode runs once
   std::vector<std::string> needs = {};  // programs that must be on the PATH, or the suite is skipped
   // Benchmarks (a part of their names) a full build has, with the reason
   // to report when the binary lacks them (a peer it was built without).
   std::vector<std::pair<std::string, std::string>> expected = {};
   // Environment the quick mode gives the binary (fewer requests, say).
   std::vector<std::pair<std::string, std::string>> quick_env = {};
-  // Adds the figures of one benchmark's result (a Google Benchmark JSON run,
-  // the median of its repetitions when there are several).
+  // Adds the figures of one benchmark's result (a Google Benchmark JSON
+  // run; a full report takes the median of each figure over its rounds).
   std::function<void(const Json& run, Results&)> read;
 };
 
