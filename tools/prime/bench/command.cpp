@@ -254,9 +254,9 @@ int run(const Options& options) {
     progress.finish(Clock::now() - t);
   }
   progress.end();
-  auto medians_measured = medians(measured);
-  results.figures = std::move(medians_measured.figures);
-  results.skipped.insert(results.skipped.end(), medians_measured.skipped.begin(), medians_measured.skipped.end());
+  auto merged = medians(measured);
+  results.figures = std::move(merged.figures);
+  results.skipped.insert(results.skipped.end(), merged.skipped.begin(), merged.skipped.end());
 
   const RunInfo info{.quick = options.quick,
                      .interrupted = interrupted.load(),
