@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cassert>
 #include <cstddef>
 #include <optional>
 #include <span>
@@ -51,6 +52,7 @@ inline ApproximateMatch match_approximate(std::span<const std::span<const Clock:
                                           std::span<const Clock::time_point> earliest_next, Clock::duration max_span,
                                           double age_penalty = 0) {
   const auto n = queues.size();
+  assert(n <= ApproximateMatch::kMaxInputs && earliest_next.size() == n);
   for (const auto& q : queues)
     if (q.empty()) return {};
   auto newest_head = queues[0].front();
