@@ -251,6 +251,10 @@ TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndHzMeasuresASource) {
   EXPECT_NE(ls.out.find("ticks"), std::string::npos) << ls.out;
   EXPECT_NE(ls.out.find("double"), std::string::npos) << ls.out;
   EXPECT_NE(ls.out.find("int (4 bytes"), std::string::npos) << ls.out;
+  // The same server through its Unix socket, as Optimus itself reaches one.
+  const auto over_socket = prime(domain, {"--redis", server.unix_url(), "ls"});
+  EXPECT_EQ(over_socket.code, 0) << over_socket.out;
+  EXPECT_NE(over_socket.out.find("ticks"), std::string::npos) << over_socket.out;
   const auto json = last_json(prime(domain, {"--redis", server.url(), "--json", "ls"}).out);
   EXPECT_EQ(text(json.object().at("sources").array().at(0), "name"), "ticks");
   EXPECT_EQ(json.object().at("services").array().at(0).object().at("alive").value, tool::Json{true}.value);
@@ -291,6 +295,9 @@ TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndHzMeasuresASource) {
   const auto unreachable = prime(domain, {"--redis", "tcp://127.0.0.1:1", "ls"});
   EXPECT_EQ(unreachable.code, 5);
   EXPECT_NE(unreachable.out.find("unreachable"), std::string::npos) << unreachable.out;
+  const auto no_scheme = prime(domain, {"--redis", "127.0.0.1:1", "ls"});
+  EXPECT_EQ(no_scheme.code, 5);
+  EXPECT_NE(no_scheme.out.find("bad server URL '127.0.0.1:1'"), std::string::npos) << no_scheme.out;
 }
 
 }  // namespace
