@@ -224,6 +224,44 @@ TEST_F(ViewsTest, BatchesOutStayWithinMaxHeldOfTheCursorSoAPassedOverReaderKeeps
   }
 }
 
+// A batch the cursor keeps reads each sample's size and stamp beside the
+// ring, a held one in its chunk: either way they are the batch's own, and
+// stay so after the publisher has written other samples' over them.
+TEST_F(ViewsTest, ABatchKeepsEachSamplesSizeAndStampAfterTheRingHasMovedOn) {
+  for (const auto overflow : {Overflow::block, Overflow::drop_oldest}) {
+    SCOPED_TRACE(overflow == Overflow::block ? "block" : "drop_oldest");
+    const shm::TopicQos qos{.capacity = 4,
+                            .max_message_size = 64,
+                            .overflow = overflow,
+                            .block_timeout = 20ms,
+                            .max_subscribers = 1,
+                            .max_held = 4};
+    const auto topic = overflow == Overflow::block ? "sized-block" : "sized-lossy";
+    auto publisher = core.publisher<shm::Bytes>(topic, qos);
+    auto batches = core.subscribe<shm::Bytes>(topic, {}, qos).batches();
+    const std::vector<std::byte> bytes(64, std::byte{7});
+    auto publish = [&](std::uint64_t i) {
+      ASSERT_TRUE(publisher.publish(std::span{bytes}.first(1 + i % 64), Clock::time_point{Clock::duration{5000 + i}}));
+    };
+    for (std::uint64_t i = 0; i < 4; ++i) publish(i);
+    auto out = batches.try_read(4);
+    ASSERT_EQ(out.size(), 4u);
+    for (std::uint64_t i = 4; i < 40; ++i) publish(i);  // over every ring entry, many times
+    for (std::uint64_t i = 0; i < 4; ++i) {
+      EXPECT_EQ(out.bytes(i).size(), 1 + i);
+      EXPECT_EQ(out.stamp(i), Clock::time_point{Clock::duration{5000 + i}});
+    }
+    out = {};
+    auto later = batches.try_read(4);
+    ASSERT_EQ(later.size(), 4u);
+    for (std::uint64_t i = 0; i < 4; ++i) {
+      EXPECT_EQ(later.sequence(i), 36 + i);
+      EXPECT_EQ(later.bytes(i).size(), 1 + (36 + i) % 64);
+      EXPECT_EQ(later.stamp(i), Clock::time_point{Clock::duration{5036 + i}});
+    }
+  }
+}
+
 TEST_F(ViewsTest, ADropOldestTopicsBatchesAreHeldAndNeverOverwritten) {
   const shm::TopicQos qos{.capacity = 4, .max_held = 4};
   auto publisher = core.publisher<Pair>("lossy", qos);

@@ -33,6 +33,7 @@ class Views {
       : owner_{std::exchange(other.owner_, nullptr)},
         index_{other.index_},
         chunks_{std::exchange(other.chunks_, {})},
+        info_{std::exchange(other.info_, {})},
         first_{other.first_} {}
   Views& operator=(Views&& other) noexcept {
     if (this != &other) {
@@ -40,6 +41,7 @@ class Views {
       owner_ = std::exchange(other.owner_, nullptr);
       index_ = other.index_;
       chunks_ = std::exchange(other.chunks_, {});
+      info_ = std::exchange(other.info_, {});
       first_ = other.first_;
     }
     return *this;
@@ -54,13 +56,13 @@ class Views {
   }
   // The bytes of sample `i` of a raw byte topic.
   [[nodiscard]] std::span<const std::byte> bytes(std::size_t i) const noexcept {
-    return {owner_->topic().payload(chunks_[i]), static_cast<std::size_t>(owner_->topic().chunk(chunks_[i]).size)};
+    return {owner_->topic().payload(chunks_[i]), static_cast<std::size_t>(info_[i].size)};
   }
   // Sample `i`'s place in the topic: the first's plus i.
   [[nodiscard]] std::uint64_t sequence(std::size_t i) const noexcept { return first_ + i; }
   // When the publisher says sample `i` was taken.
   [[nodiscard]] Clock::time_point stamp(std::size_t i) const noexcept {
-    return Clock::time_point{Clock::duration{owner_->topic().chunk(chunks_[i]).stamp}};
+    return Clock::time_point{Clock::duration{info_[i].stamp}};
   }
 
  private:
@@ -70,16 +72,19 @@ class Views {
   Views(detail::Subscriber* owner, std::uint32_t index) : owner_{owner}, index_{index} {
     const auto& batch = owner->cursor().batch(index);
     chunks_ = batch.chunks;
+    info_ = batch.info;
     first_ = batch.first;
   }
   void end() noexcept {
     if (owner_) std::exchange(owner_, nullptr)->end_batch(index_);
     chunks_ = {};
+    info_ = {};
   }
 
   detail::Subscriber* owner_ = nullptr;  // kept alive by the samples this batch counts
   std::uint32_t index_ = 0;
   std::span<const std::uint32_t> chunks_;  // the batch's, unchanged while it is out
+  std::span<const detail::TakenInfo> info_;
   std::uint64_t first_ = 0;
 };
 

@@ -26,12 +26,19 @@ struct Taken {
   std::uint64_t seq;
 };
 
+// A sample's size and stamp, as read when it was taken.
+struct TakenInfo {
+  std::uint64_t size;
+  std::int64_t stamp;
+};
+
 // Samples taken together for a batch of views (shm::Views): consecutive
 // sequences from `first`, let go of together.
 struct TakenBatch {
   std::atomic<bool> out{false};  // its Views lives; cleared when it ends, on any thread
   std::uint64_t first = 0;
   std::vector<std::uint32_t> chunks;
+  std::vector<TakenInfo> info;  // chunks[i]'s
   // By the subscriber's bit, released when it ends; else by the cursor.
   bool held = false;
   // Held for it by a publisher that stopped waiting (taking thread only):
@@ -171,9 +178,16 @@ class Cursor {
     const auto index = free_.back();
     auto& b = batches_[index];
     b.chunks.clear();
-    b.chunks.reserve(max);  // the one step that may throw: before anything is taken
-    free_.pop_back();       // before anything retires more
+    b.info.clear();
+    b.chunks.reserve(max);  // the steps that may throw: before anything is taken
+    b.info.reserve(max);
+    free_.pop_back();  // before anything retires more
     while (true) {
+      // A batch the cursor may keep reads its samples' sizes and stamps
+      // beside the ring, before the look at `lagging` that decides whether
+      // it is kept (SampleInfo says why that order); a held one, in each
+      // chunk once it is held.
+      const bool may_keep = may_cover(next_);
       for (auto seq = next_; seq - next_ < max; ++seq) {
         const auto entry = topic_->ring(seq).load(std::memory_order_acquire);
         const auto ahead = RingEntry::ahead(entry, seq);
@@ -187,17 +201,23 @@ class Cursor {
           break;
         }
         const auto chunk = RingEntry::chunk(entry);
-        __builtin_prefetch(&topic_->chunk(chunk));  // its size and stamp, read for the view
         __builtin_prefetch(topic_->payload(chunk));
         b.chunks.push_back(chunk);
+        if (may_keep) {
+          const auto& info = topic_->info(seq);
+          b.info.push_back({info.size.load(std::memory_order_acquire), info.stamp.load(std::memory_order_acquire)});
+        } else {
+          prefetch_for_write(&topic_->chunk(chunk));  // for the hold
+        }
       }
       if (b.chunks.empty()) {
         skip_overwritten();
         continue;
       }
-      if (may_cover(next_)) keep_within_reach(next_ + b.chunks.size(), held);
-      b.held = !covers(next_);  // after the ring entries' loads, and kept_end's store
+      if (may_keep) keep_within_reach(next_ + b.chunks.size(), held);
+      b.held = !covers(next_);  // after the ring entries' and infos' loads, and kept_end's store
       if (!b.held) break;
+      b.info.clear();
       for (std::size_t i = 0; i < b.chunks.size(); ++i) {
         auto& chunk = topic_->chunk(b.chunks[i]);
         chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
@@ -206,6 +226,7 @@ class Cursor {
           b.chunks.resize(i);  // later ones are not held yet
           break;
         }
+        b.info.push_back({chunk.size, chunk.stamp});
       }
       if (!b.chunks.empty()) break;
       skip_overwritten();

@@ -15,7 +15,8 @@ namespace prime::shm::detail {
 // lock-free atomics, addressed by offsets from the segment's start (no
 // pointers), so each process may map it anywhere.
 //
-//   TopicHeader | ring: capacity × RingEntry word | chunks: chunk_count × (ChunkHeader + payload)
+//   TopicHeader | ring: capacity × RingEntry word | info: capacity × SampleInfo
+//               | chunks: chunk_count × (ChunkHeader + payload)
 //
 // Samples live in chunks. The ring names the chunks of the last `capacity`
 // sequences; a chunk is free when no one holds it. Who holds a chunk is one
@@ -34,7 +35,7 @@ using ParticipantId = std::uint64_t;
 inline constexpr ParticipantId kReclaiming = ~0ull;  // a slot whose dead owner is being cleared
 
 inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;  // "PRIMESM4"
-inline constexpr std::uint32_t kLayoutVersion = 6;
+inline constexpr std::uint32_t kLayoutVersion = 7;
 // Room for a message type's description (prime::schema_of), for tools.
 inline constexpr std::size_t kSchemaCapacity = 2048;
 // Subscriber slots a topic may offer; one more is kept for tools that observe.
@@ -47,6 +48,11 @@ inline constexpr std::uint64_t kNotPublished = ~0ull;  // a chunk's sequence whe
 inline constexpr std::uint32_t kNoChunk = (1u << 24) - 1;
 inline constexpr std::uint64_t kNoCursor = ~0ull;      // a subscriber slot not (yet) reading
 inline constexpr std::size_t kPayloadAlignment = 64;
+// The infos and the chunks each start a page: a reader walking the ring or
+// the infos does not have the hardware prefetcher pull in the lines after
+// them, which the publisher writes (measured: batches of views at 64 bytes
+// 1.2x faster than with the parts packed to the line).
+inline constexpr std::size_t kPageAlignment = 4096;
 inline constexpr std::uint64_t kPublisherSleeper = 1;  // the space doorbell's one sleeper
 
 // A ring entry: which chunk carries which sequence, in one word, so that a
@@ -74,6 +80,20 @@ struct RingEntry {
   }
 };
 static_assert(RingEntry::kChunkBits + RingEntry::kSeqBits == 64);
+
+// A published sample's size and stamp, beside its ring entry (info[i] goes
+// with ring[i]), written before the entry. A batch reader that its cursor
+// keeps (Cursor::take_batch) reads them here, four samples to a line, and
+// not in the chunks' headers, which then stay in the publisher's cache.
+// Those keep their own copy: a reader holding a chunk reads it there, as
+// the ring may name another sample by then. Stored with release and loaded
+// with acquire: a value the publisher wrote after passing the reader over
+// (SubscriberSlot::lagging) comes with that news.
+struct SampleInfo {
+  std::atomic<std::uint64_t> size{0};
+  std::atomic<std::int64_t> stamp{0};
+};
+static_assert(sizeof(SampleInfo) == 16);
 
 struct alignas(kPayloadAlignment) ChunkHeader {
   std::atomic<std::uint64_t> holders{0};
@@ -115,6 +135,7 @@ struct TopicHeader {
   std::uint64_t max_subscribers = 0;
   std::uint64_t max_held = 0;
   std::uint64_t ring_offset = 0;
+  std::uint64_t info_offset = 0;
   std::uint64_t chunks_offset = 0;
   char schema[kSchemaCapacity]{};  // the message type's description; "?<size>" when it has none
 
@@ -160,8 +181,11 @@ struct TopicGeometry {
   // publisher loans.
   [[nodiscard]] constexpr std::size_t chunk_count() const { return capacity + max_subscribers * max_held + 2; }
   [[nodiscard]] constexpr std::size_t ring_offset() const { return round_up(sizeof(TopicHeader), kPayloadAlignment); }
+  [[nodiscard]] constexpr std::size_t info_offset() const {
+    return round_up(ring_offset() + capacity * sizeof(std::uint64_t), kPageAlignment);
+  }
   [[nodiscard]] constexpr std::size_t chunks_offset() const {
-    return round_up(ring_offset() + capacity * sizeof(std::uint64_t), kPayloadAlignment);
+    return round_up(info_offset() + capacity * sizeof(SampleInfo), kPageAlignment);
   }
   [[nodiscard]] constexpr std::size_t chunk_stride() const {
     return round_up(sizeof(ChunkHeader) + max_message_size, kPayloadAlignment);
@@ -185,7 +209,7 @@ inline std::string damage(const TopicHeader& h, std::size_t size) {
   const TopicGeometry g{h.capacity, h.max_message_size, h.max_subscribers, h.max_held};
   if (g.chunk_count() >= kNoChunk) return std::to_string(g.chunk_count()) + " chunks, more than a ring entry can name";
   if (h.chunk_count != g.chunk_count() || h.chunk_stride != g.chunk_stride() || h.ring_offset != g.ring_offset() ||
-      h.chunks_offset != g.chunks_offset())
+      h.info_offset != g.info_offset() || h.chunks_offset != g.chunks_offset())
     return "a layout that does not follow from its capacity, message size and subscriber slots";
   if (g.bytes() > size)
     return std::to_string(g.bytes()) + " bytes of layout in a segment of " + std::to_string(size);

@@ -66,6 +66,7 @@ class Topic {
   [[nodiscard]] std::uint64_t ring_index(std::uint64_t seq) const noexcept {
     return ring_mask_ != 0 ? seq & ring_mask_ : seq % capacity_;
   }
+  [[nodiscard]] SampleInfo& info(std::uint64_t seq) const noexcept { return info_[ring_index(seq)]; }
   [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept {
     return *std::launder(reinterpret_cast<ChunkHeader*>(chunks_ + i * header_->chunk_stride));
   }
@@ -133,6 +134,7 @@ class Topic {
         segment_{std::move(segment)},
         header_{std::launder(reinterpret_cast<TopicHeader*>(segment_.data()))},
         ring_{reinterpret_cast<std::atomic<std::uint64_t>*>(segment_.data() + header_->ring_offset)},
+        info_{std::launder(reinterpret_cast<SampleInfo*>(segment_.data() + header_->info_offset))},
         chunks_{segment_.data() + header_->chunks_offset},
         capacity_{header_->capacity},
         ring_mask_{std::has_single_bit(capacity_) ? capacity_ - 1 : 0} {}
@@ -168,6 +170,7 @@ class Topic {
     header->max_held = qos.max_held;
     header->block_timeout_ns.store(std::chrono::nanoseconds{qos.block_timeout}.count());
     header->ring_offset = geometry.ring_offset();
+    header->info_offset = geometry.info_offset();
     header->chunks_offset = geometry.chunks_offset();
     header->head.store(first);
     // Each entry one lap behind the first sequence that will land in it: nothing published yet.
@@ -176,6 +179,7 @@ class Topic {
     for (std::size_t k = 0; k < cap; ++k) {
       const auto lands = first + (k + cap - first % cap) % cap;
       ::new (ring + k) std::atomic<std::uint64_t>{RingEntry::pack(lands - cap, kNoChunk)};
+      ::new (data + header->info_offset + k * sizeof(SampleInfo)) SampleInfo{};
     }
     for (std::size_t i = 0; i < header->chunk_count; ++i)
       ::new (data + header->chunks_offset + i * header->chunk_stride) ChunkHeader{};
@@ -187,6 +191,7 @@ class Topic {
   Segment segment_;
   TopicHeader* header_;
   std::atomic<std::uint64_t>* ring_;
+  SampleInfo* info_;
   std::byte* chunks_;
   std::uint64_t capacity_;   // the header's, read once
   std::uint64_t ring_mask_;  // capacity_ - 1 where that is a power of two, else 0

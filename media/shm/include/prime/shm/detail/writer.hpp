@@ -116,6 +116,9 @@ class Writer {
       if (!chunk) break;
       out.push_back(*chunk);
     }
+    // The lines of their infos, on their way while the samples are written.
+    for (std::uint64_t k = 0; k < out.size(); k += kInfosPerLine) prefetch_for_write(&topic_->info(next_ + k));
+    prefetch_for_write(&topic_->info(next_ + out.size() - 1));
     return {};
   }
 
@@ -132,8 +135,7 @@ class Writer {
     const auto first = next_;
     for (std::size_t i = 0; i < chunks.size(); ++i) {
       auto& c = topic_->chunk(chunks[i]);
-      c.size = size;
-      c.stamp = stamp_of(i).time_since_epoch().count();
+      describe(c, first + i, size, stamp_of(i));
       c.seq.store(first + i, std::memory_order_release);
       to_ring(c);
     }
@@ -157,8 +159,7 @@ class Writer {
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
     auto& c = topic_->chunk(chunk);
     const auto seq = next_++;
-    c.size = size;
-    c.stamp = stamp.time_since_epoch().count();
+    describe(c, seq, size, stamp);
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
@@ -169,6 +170,18 @@ class Writer {
   }
 
  private:
+  // Sample `seq`'s size and stamp: in its chunk, for readers that hold it,
+  // and beside its ring entry, for batch readers their cursor keeps
+  // (SampleInfo). Both before the ring entry.
+  void describe(ChunkHeader& c, std::uint64_t seq, std::size_t size, Clock::time_point stamp) const noexcept {
+    const auto ticks = stamp.time_since_epoch().count();
+    c.size = size;
+    c.stamp = ticks;
+    auto& info = topic_->info(seq);
+    info.size.store(size, std::memory_order_release);
+    info.stamp.store(ticks, std::memory_order_release);
+  }
+
   // The head, ordered before the look for sleepers that follows it (in
   // wake_subscribers): by a full fence, which waits for this publish's
   // stores to reach the subscribers' CPUs; or, for a light publisher no
@@ -430,6 +443,7 @@ class Writer {
   // Claimed ahead of the loans when the ring gives back none: enough that a
   // loan's lines have arrived by the time it is written.
   static constexpr std::size_t kAhead = 4;
+  static constexpr std::size_t kInfosPerLine = 64 / sizeof(SampleInfo);
   static constexpr std::size_t kLeavingMax = 8;
   // Chunks this publisher holds by its loan bit for the next loans: claimed
   // ahead, or taken over as they left the ring. Bounded, so a publisher that
