@@ -66,6 +66,7 @@ class Topic {
   [[nodiscard]] std::uint64_t ring_index(std::uint64_t seq) const noexcept {
     return ring_mask_ != 0 ? seq & ring_mask_ : seq % capacity_;
   }
+  // The size and stamp beside ring(seq) (SampleInfo).
   [[nodiscard]] SampleInfo& info(std::uint64_t seq) const noexcept { return info_[ring_index(seq)]; }
   [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept {
     return *std::launder(reinterpret_cast<ChunkHeader*>(chunks_ + i * header_->chunk_stride));
