@@ -160,6 +160,7 @@ class Cursor {
           views_[index].store(1, std::memory_order_relaxed);
           const Taken taken{index, next_};
           advance(next_ + 1);
+          prefetch_next();
           return taken;
         }
         chunk.holders.fetch_and(~bit_);
@@ -457,6 +458,18 @@ class Cursor {
   // per step, not per sample, on the line the publisher reads to learn
   // whether it has room. A publisher waiting for this subscriber is woken
   // at once (space_wanted is on a line of its own, rarely written).
+  // When the next sample is out already (a reader behind its publisher),
+  // asks for its chunk's lines now, so they travel while this one is read:
+  // a chunk a page or more from the last is not one the hardware
+  // prefetcher finds (measured: one at a time at 1 MiB 1.6x faster, the
+  // same rate as at 64 bytes). Relaxed: it only prefetches; the take loads
+  // the entry again.
+  void prefetch_next() const noexcept {
+    const auto entry = topic_->ring(next_).load(std::memory_order_relaxed);
+    if (RingEntry::ahead(entry, next_) != 0) return;
+    prefetch_for_write(&topic_->chunk(RingEntry::chunk(entry)));  // for the hold
+    __builtin_prefetch(topic_->payload(RingEntry::chunk(entry)));
+  }
   void advance(std::uint64_t seq) {
     next_ = seq;
     if (next_ - acked_ >= ack_every_ ||
