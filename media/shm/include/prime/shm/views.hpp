@@ -84,7 +84,7 @@ class Views {
   detail::Subscriber* owner_ = nullptr;  // kept alive by the samples this batch counts
   std::uint32_t index_ = 0;
   std::span<const std::uint32_t> chunks_;  // the batch's, unchanged while it is out
-  std::span<const detail::TakenInfo> info_;
+  std::span<const detail::TakenInfo> info_;  // each sample's size and stamp, copied when taken
   std::uint64_t first_ = 0;
 };
 

@@ -443,7 +443,7 @@ class Writer {
   // Claimed ahead of the loans when the ring gives back none: enough that a
   // loan's lines have arrived by the time it is written.
   static constexpr std::size_t kAhead = 4;
-  static constexpr std::size_t kInfosPerLine = 64 / sizeof(SampleInfo);
+  static constexpr std::size_t kInfosPerLine = kPayloadAlignment / sizeof(SampleInfo);  // a line of them
   static constexpr std::size_t kLeavingMax = 8;
   // Chunks this publisher holds by its loan bit for the next loans: claimed
   // ahead, or taken over as they left the ring. Bounded, so a publisher that
