@@ -353,6 +353,23 @@ TEST_F(ShmTest, ADamagedTopicIsRefusedByNameAndPassedOverByTools) {
   ASSERT_TRUE(other.subscribe<int>("fine").subscribe().try_read() == std::nullopt);
 }
 
+// A topic laid out by another version of Prime (another ring, chunk stride
+// or header) is refused by that name, not read with this version's offsets;
+// so is one that claims this version but whose chunks lie elsewhere.
+TEST_F(ShmTest, ATopicOfAnotherLayoutIsRefusedByVersion) {
+  auto publisher = core.publisher<int>("old");
+  const auto layout = shm::detail::kLayoutVersion;
+  MappedTopic{core.domain(), "old"}.header().layout = layout - 1;
+  shm::Core other{core.domain()};
+  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("old"); }, Errc::type_mismatch,
+                         "topic 'old': made by another version of Prime (layout " + std::to_string(layout - 1) +
+                             ", this one reads " + std::to_string(layout) + ")"));
+  MappedTopic{core.domain(), "old"}.header().layout = layout;
+  MappedTopic{core.domain(), "old"}.header().chunk_stride -= shm::detail::kPayloadAlignment;
+  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("old"); }, Errc::type_mismatch,
+                         "does not follow from its capacity"));
+}
+
 TEST_F(ShmTest, OtherQosIsRefusedWhicheverSideOpensTheTopicFirst) {
   const shm::TopicQos sixteen{.capacity = 16}, thirty_two{.capacity = 32};
   {
