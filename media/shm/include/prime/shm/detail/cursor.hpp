@@ -454,10 +454,6 @@ class Cursor {
     }
     live_.resize(kept);
   }
-  // The cursor in shared memory follows in steps (acknowledge): one store
-  // per step, not per sample, on the line the publisher reads to learn
-  // whether it has room. A publisher waiting for this subscriber is woken
-  // at once (space_wanted is on a line of its own, rarely written).
   // When the next sample is out already (a reader behind its publisher),
   // asks for its chunk's lines now, so they travel while this one is read:
   // a chunk a page or more from the last is not one the hardware
@@ -470,6 +466,10 @@ class Cursor {
     prefetch_for_write(&topic_->chunk(RingEntry::chunk(entry)));  // for the hold
     __builtin_prefetch(topic_->payload(RingEntry::chunk(entry)));
   }
+  // The cursor in shared memory follows in steps (acknowledge): one store
+  // per step, not per sample, on the line the publisher reads to learn
+  // whether it has room. A publisher waiting for this subscriber is woken
+  // at once (space_wanted is on a line of its own, rarely written).
   void advance(std::uint64_t seq) {
     next_ = seq;
     if (next_ - acked_ >= ack_every_ ||
