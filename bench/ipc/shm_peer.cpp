@@ -26,6 +26,14 @@
 //                    kBatch, in one read_some.
 //   ShmViews         ShmBatch read in shm::Views batches (BatchReader):
 //                    each batch let go of at once, not view by view.
+//   PublisherAlone   Throughput's publishing side (ShmBatch's, for
+//                    PublisherAlone_ShmBatch) in this one process, on the same
+//                    topic with no subscriber, one message per iteration. No
+//                    cache line crosses cores, no one is waited for: what is
+//                    left is the publisher's own bookkeeping per message, the
+//                    most it could ever send to another process. The only
+//                    benchmarks here with no second process: the figure the
+//                    two-process ones are read against.
 #include <chrono>
 #include <cstdint>
 #include <optional>
@@ -257,5 +265,42 @@ void BM_Throughput_ShmViews(benchmark::State& state) {
   });
 }
 BENCHMARK(BM_Throughput_ShmViews)->Apply(ipc::throughput_payloads);
+
+template <bool kBatches>
+void publisher_alone(benchmark::State& state) {
+  ipc::run(state, [&](std::size_t bytes) {
+    const auto domain = ipc::new_shm_domain();
+    shm::Core core{domain};
+    auto out = core.publisher<shm::Bytes>("stream", kBatches ? batch_qos(bytes) : stream_qos(bytes));
+    const auto start = prime::Clock::now();
+    std::optional<shm::Batch<shm::Bytes>> batch;  // being written, when kBatches
+    std::vector<prime::Clock::time_point> stamps;
+    stamps.reserve(kBatch);
+    // As the other side would receive them: seq = 1, 2, 3..., one per iteration.
+    ipc::time_stream(state, [&](std::uint64_t seq) {
+      const auto stamp = start + prime::Clock::duration{seq};
+      if constexpr (!kBatches) {
+        send(out, bytes, seq, stamp);
+      } else {
+        if (!batch) {
+          auto loaned = out.loan_some(kBatch, bytes);
+          if (!loaned) throw ipc::PeerError{"shm: " + loaned.error().describe()};
+          batch.emplace(std::move(*loaned));
+          stamps.clear();
+        }
+        ipc::stamp(batch->bytes(stamps.size()).data(), seq);
+        stamps.push_back(stamp);
+        if (stamps.size() == batch->size()) {
+          std::move(*batch).publish(stamps);
+          batch.reset();
+        }
+      }
+    });
+  });
+}
+void BM_PublisherAlone_Shm(benchmark::State& state) { publisher_alone<false>(state); }
+void BM_PublisherAlone_ShmBatch(benchmark::State& state) { publisher_alone<true>(state); }
+BENCHMARK(BM_PublisherAlone_Shm)->Arg(64)->UseRealTime();
+BENCHMARK(BM_PublisherAlone_ShmBatch)->Arg(64)->UseRealTime();
 
 }  // namespace

@@ -350,6 +350,13 @@ std::string headline(const Results& r) {
       r.find("ShmViews", "throughput", 64, "rate"), true,
       {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
        {"read_some", r.find("ShmBatch", "throughput", 64, "rate")}});
+  row("Shm publisher alone, in batches (one process, nobody reading: its own bookkeeping), 64 B",
+      r.find("ShmBatch", "publisher-alone", 64, "rate"), true,
+      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
+       {"Views across processes", r.find("ShmViews", "throughput", 64, "rate")}});
+  row("Shm publisher alone, one at a time, 64 B", r.find("Shm", "publisher-alone", 64, "rate"), true,
+      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
+       {"Shm across processes", r.find("Shm", "throughput", 64, "rate")}});
   row("Shm publish to 4 reader processes, 64 B (publisher's time per message)",
       r.find("Shm", "fanout-publish-4", 64, "publish"), false,
       {{"1 reader", r.find("Shm", "fanout-publish-1", 64, "publish")},
@@ -437,7 +444,10 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
   image("throughput", "throughput against payload");
   md << "The floor is a plain single-producer/single-consumer ring of 64-byte slots in shared memory between the same "
         "two processes.\n\n"
-     << scenario_table(results, "throughput", "SpscFloor", true) << '\n';
+     << scenario_table(results, "throughput", "SpscFloor", true) << '\n'
+     << "The headline's \"publisher alone\" rows run Shm's publishing side by itself, in one process, on the same "
+        "topic with nobody reading: no cache line crosses cores, so their rate is the publisher's own bookkeeping, "
+        "the most it could send to another process.\n\n";
   md << "## Service round trip\n\n";
   image("service", "service round trip against payload");
   md << scenario_table(results, "round-trip", "", false) << '\n' << distribution_table(results, "round-trip") << '\n';
