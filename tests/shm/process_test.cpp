@@ -131,14 +131,18 @@ TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleLeavesADropOldestPublishe
 }
 
 // Reads what a publisher process overwrites heavily, one sample at a time
-// or (`batches`) every sample available in one read_some.
-void expect_no_torn_sample(bool batches) {
+// or (`batches`) every sample available in one read_some; the publisher
+// publishes one at a time or (`published_in_batches`) up to a ring at once,
+// when the chunks leaving the ring are evicted after the head's fence.
+void expect_no_torn_sample(bool batches, bool published_in_batches = false) {
   const auto domain = unique_domain("torn");
   shm::Core core{domain};
   auto topic = core.subscribe<Checked>("checked", {}, kCheckedQos);
   auto reader = topic.subscribe();
   const MappedTopic mapped{domain, "checked"};
-  PeerProcess publisher{{"checksum_publish", domain, "checked", "200000"}};
+  std::vector<std::string> args{"checksum_publish", domain, "checked", "200000"};
+  if (published_in_batches) args.emplace_back("batches");
+  PeerProcess publisher{args};
   std::uint64_t received = 0, torn = 0, last = 0;
   std::vector<Sample<shm::View<Checked>>> taken;
   auto next = [&]() -> std::optional<Sample<shm::View<Checked>>> {
@@ -173,6 +177,12 @@ void expect_no_torn_sample(bool batches) {
 TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwrite) { expect_no_torn_sample(false); }
 
 TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwriteToABatchReader) { expect_no_torn_sample(true); }
+
+TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwriteInBatches) { expect_no_torn_sample(false, true); }
+
+TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwriteInBatchesToABatchReader) {
+  expect_no_torn_sample(true, true);
+}
 
 // A publisher process runs `role` (sequence_publish or batch_publish): this
 // process reads 0..count-1 in batches, of views (read_some) or as Views

@@ -56,6 +56,7 @@ class Writer {
     h.light_publisher.store(light_ ? 1 : 0, std::memory_order_seq_cst);
     next_ = h.head.load();
     in_ring_.resize(h.capacity);
+    leaving_.reserve(h.capacity + kLeavingMax);
     for (std::uint64_t i = 0; i < h.capacity; ++i) in_ring_[i] = RingEntry::chunk(topic_->ring(i).load());
   }
   Writer(const Writer&) = delete;
@@ -129,7 +130,7 @@ class Writer {
   // order, chunk i stamped stamp_of(i). Never waits. As publish() does, for
   // all at once: every header, then the ring entries one after another (a
   // subscriber polling the ring fetches its line once for several samples,
-  // not once for each), then the head and one wake.
+  // not once for each), the chunks they push out, then the head and one wake.
   template <class StampOf>
   void publish_some(std::span<const std::uint32_t> chunks, std::size_t size, StampOf&& stamp_of) noexcept {
     const auto first = next_;
@@ -141,10 +142,16 @@ class Writer {
     }
     for (std::size_t i = 0; i < chunks.size(); ++i)
       topic_->ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
-    next_ = first + chunks.size();
-    store_head(next_);
     for (std::size_t i = 0; i < chunks.size(); ++i)
       if (const auto old = std::exchange(in_ring_[topic_->ring_index(first + i)], chunks[i]); old != kNoChunk) leave(old);
+    next_ = first + chunks.size();
+    // A full fence for the head serves the evictions too (evict_leaving):
+    // no fence and no read-modify-write of their own, per batch or sample.
+    const bool fully = fences_fully();
+    if (fully) clear_leaving();
+    store_head(next_, fully);
+    if (fully) evict_leaving(true);
+    else if (leaving_.size() >= kLeavingMax) evict_leaving();
     wake_subscribers();
     claim_ahead();
   }
@@ -163,8 +170,9 @@ class Writer {
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
-    store_head(seq + 1);
+    store_head(seq + 1, fences_fully());
     if (const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk); old != kNoChunk) leave(old);
+    if (leaving_.size() >= kLeavingMax) evict_leaving();
     wake_subscribers();
     claim_ahead();
   }
@@ -186,14 +194,14 @@ class Writer {
   // wake_subscribers): by a full fence, which waits for this publish's
   // stores to reach the subscribers' CPUs; or, for a light publisher no
   // subscriber asked for full fences, by the light half of an asymmetric one.
-  void store_head(std::uint64_t head) noexcept {
-    auto& h = topic_->header();
-    if (light_ && h.full_fences_wanted.load(std::memory_order_relaxed) == 0) {
-      h.head.store(head, std::memory_order_release);
-      light_fence();
-    } else {
-      h.head.store(head, std::memory_order_seq_cst);
-    }
+  // `fully`: fences_fully(), read once for the publish.
+  void store_head(std::uint64_t head, bool fully) noexcept {
+    topic_->header().head.store(head, std::memory_order_release);
+    if (fully) std::atomic_thread_fence(std::memory_order_seq_cst);
+    else light_fence();
+  }
+  [[nodiscard]] bool fences_fully() const noexcept {
+    return !light_ || topic_->header().full_fences_wanted.load(std::memory_order_relaxed) != 0;
   }
 
   // A loaned chunk passes from the loan to the ring. No subscriber holds it
@@ -230,36 +238,57 @@ class Writer {
     prefetch_for_write(topic_->payload(chunk));
   }
 
-  // A chunk pushed out of the ring. Its eviction waits until kLeavingMax have
-  // left, or the spares run out: an eviction is a read-modify-write, which
-  // waits for every store before it to reach the other CPUs, the ring entry
-  // just stored on the line a subscriber polls among them. So it is one such
-  // wait per kLeavingMax samples, not per sample. Until evicted, a chunk
-  // keeps its sequence and the ring's bit: a subscriber that looked it up in
-  // the ring before it was replaced may still take it, as before.
+  // A chunk pushed out of the ring. Its eviction waits for the batch's head,
+  // or until kLeavingMax have left, or until the spares run out: an eviction
+  // needs a full fence (evict), which waits for every store before it to
+  // reach the other CPUs, the ring entry just stored on the line a
+  // subscriber polls among them. So it is one such wait per batch or per
+  // kLeavingMax samples, not per sample. Until evicted, a chunk keeps its
+  // sequence and the ring's bit: a subscriber that looked it up in the ring
+  // before it was replaced may still take it.
   void leave(std::uint32_t old) noexcept {
-    leaving_.push(old);
+    leaving_.push_back(old);
     prefetch_for_write(&topic_->chunk(old));
-    if (leaving_.size() == kLeavingMax) evict_leaving();
   }
-  void evict_leaving() noexcept {
-    while (auto old = leaving_.pop()) evict(*old);
+  // The leaving chunks carry their samples no more: before the full fence
+  // that evict() relies on.
+  void clear_leaving() noexcept {
+    for (const auto old : leaving_) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
+  }
+  // `fenced`: clear_leaving() and a full fence have come since the last chunk left.
+  void evict_leaving(bool fenced = false) noexcept {
+    if (leaving_.empty()) return;
+    if (!fenced) {
+      clear_leaving();
+      std::atomic_thread_fence(std::memory_order_seq_cst);
+    }
+    for (const auto old : leaving_) evict(old);
+    leaving_.clear();
   }
 
-  // A chunk pushed out of the ring. Released by the read-modify-write: a
-  // subscriber whose hold lands after it sees the chunk no longer carries
-  // that sequence. If no subscriber holds it, it goes from the ring straight
-  // to this publisher's spare loans (one step on a line it has just fetched),
-  // else the last subscriber to let it go frees it.
+  // A chunk that left the ring, its sequence cleared and fenced since. If no
+  // subscriber holds it, it goes from the ring straight to this publisher's
+  // spare loans, on a plain load and store of its holders (no
+  // read-modify-write: that would wait, per sample, for every store before
+  // it to reach the other CPUs); else the last subscriber to let it go
+  // frees it.
+  //
+  // Why a plain store does: a subscriber holds a chunk by setting its bit
+  // (seq_cst) and then checking the chunk's sequence. With the fence between
+  // this publisher's clearing of the sequence and its load of the holders,
+  // either the load sees the bit, or the subscriber sees the sequence
+  // cleared, takes its bit back and reads nothing: a bit the store wipes is
+  // one its owner clears anyway. Bits of dead subscribers, cleared by whoever
+  // reclaims them, are gone once they are. A batch that a subscriber's cursor
+  // kept, and holds later without a check (Cursor::hold), never lies in a
+  // chunk leaving the ring: the publisher waits for that cursor, or held the
+  // batch's chunks for the subscriber when it stopped waiting.
   void evict(std::uint32_t old) noexcept {
     auto& dropped = topic_->chunk(old);
-    dropped.seq.store(kNotPublished, std::memory_order_relaxed);
-    if (!spare_.full()) {
-      auto only_ring = kRingBit;
-      if (dropped.holders.compare_exchange_strong(only_ring, kLoanBit, std::memory_order_acq_rel)) {
-        keep_spare(old);
-        return;
-      }
+    if (!spare_.full() && dropped.holders.load(std::memory_order_acquire) == kRingBit) {
+      dropped.holders.store(kLoanBit, std::memory_order_relaxed);
+      keep_spare(old);
+      return;
     }
     dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
   }
@@ -449,7 +478,9 @@ class Writer {
   // ahead, or taken over as they left the ring. Bounded, so a publisher that
   // loans one at a time after a batch does not sit on many.
   Fifo<64> spare_;
-  Fifo<kLeavingMax> leaving_;  // out of the ring, not evicted yet (see leave)
+  // Out of the ring, not evicted yet (see leave): reserved for a batch as
+  // large as the ring, and as many as may be left from before.
+  std::vector<std::uint32_t> leaving_;
   std::vector<std::uint32_t> in_ring_;  // the chunk each ring entry names, as this publisher wrote it
   std::uint64_t min_cursor_ = 0;    // the slowest subscriber's cursor when last looked at
   int idle_rings_ = 0;              // rings in a row that found a sleeper's bit but woke no one
