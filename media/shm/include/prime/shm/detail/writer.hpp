@@ -145,13 +145,12 @@ class Writer {
     for (std::size_t i = 0; i < chunks.size(); ++i)
       if (const auto old = std::exchange(in_ring_[topic_->ring_index(first + i)], chunks[i]); old != kNoChunk) leave(old);
     next_ = first + chunks.size();
-    // A full fence for the head serves the evictions too (evict_leaving):
-    // no fence and no read-modify-write of their own, per batch or sample.
-    const bool fully = fences_fully();
-    if (fully) clear_leaving();
-    store_head(next_, fully);
-    if (fully) evict_leaving(true);
-    else if (leaving_.size() >= kLeavingMax) evict_leaving();
+    clear_leaving();
+    store_head(next_);
+    // One fence for the batch's evictions (evict), not a read-modify-write
+    // per sample: the head's store has just waited for the stores before it.
+    std::atomic_thread_fence(std::memory_order_seq_cst);
+    evict_leaving(true);
     wake_subscribers();
     claim_ahead();
   }
@@ -170,7 +169,7 @@ class Writer {
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
-    store_head(seq + 1, fences_fully());
+    store_head(seq + 1);
     if (const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk); old != kNoChunk) leave(old);
     if (leaving_.size() >= kLeavingMax) evict_leaving();
     wake_subscribers();
@@ -194,14 +193,14 @@ class Writer {
   // wake_subscribers): by a full fence, which waits for this publish's
   // stores to reach the subscribers' CPUs; or, for a light publisher no
   // subscriber asked for full fences, by the light half of an asymmetric one.
-  // `fully`: fences_fully(), read once for the publish.
-  void store_head(std::uint64_t head, bool fully) noexcept {
-    topic_->header().head.store(head, std::memory_order_release);
-    if (fully) std::atomic_thread_fence(std::memory_order_seq_cst);
-    else light_fence();
-  }
-  [[nodiscard]] bool fences_fully() const noexcept {
-    return !light_ || topic_->header().full_fences_wanted.load(std::memory_order_relaxed) != 0;
+  void store_head(std::uint64_t head) noexcept {
+    auto& h = topic_->header();
+    if (light_ && h.full_fences_wanted.load(std::memory_order_relaxed) == 0) {
+      h.head.store(head, std::memory_order_release);
+      light_fence();
+    } else {
+      h.head.store(head, std::memory_order_seq_cst);
+    }
   }
 
   // A loaned chunk passes from the loan to the ring. No subscriber holds it
@@ -240,55 +239,57 @@ class Writer {
 
   // A chunk pushed out of the ring. Its eviction waits for the batch's head,
   // or until kLeavingMax have left, or until the spares run out: an eviction
-  // needs a full fence (evict), which waits for every store before it to
-  // reach the other CPUs, the ring entry just stored on the line a
-  // subscriber polls among them. So it is one such wait per batch or per
-  // kLeavingMax samples, not per sample. Until evicted, a chunk keeps its
-  // sequence and the ring's bit: a subscriber that looked it up in the ring
-  // before it was replaced may still take it.
+  // is a read-modify-write or follows a full fence (evict), either of which
+  // waits for every store before it to reach the other CPUs, the ring entry
+  // just stored on the line a subscriber polls among them. So it is one such
+  // wait per kLeavingMax samples, or one per batch. Until evicted, a chunk
+  // keeps its sequence and the ring's bit: a subscriber that looked it up in
+  // the ring before it was replaced may still take it.
   void leave(std::uint32_t old) noexcept {
     leaving_.push_back(old);
     prefetch_for_write(&topic_->chunk(old));
   }
   // The leaving chunks carry their samples no more: before the full fence
-  // that evict() relies on.
+  // that a fenced eviction relies on.
   void clear_leaving() noexcept {
     for (const auto old : leaving_) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
   }
   // `fenced`: clear_leaving() and a full fence have come since the last chunk left.
   void evict_leaving(bool fenced = false) noexcept {
-    if (leaving_.empty()) return;
-    if (!fenced) {
-      clear_leaving();
-      std::atomic_thread_fence(std::memory_order_seq_cst);
-    }
-    for (const auto old : leaving_) evict(old);
+    for (const auto old : leaving_) evict(old, fenced);
     leaving_.clear();
   }
 
-  // A chunk that left the ring, its sequence cleared and fenced since. If no
-  // subscriber holds it, it goes from the ring straight to this publisher's
-  // spare loans, on a plain load and store of its holders (no
-  // read-modify-write: that would wait, per sample, for every store before
-  // it to reach the other CPUs); else the last subscriber to let it go
-  // frees it.
-  //
-  // Why a plain store does: a subscriber holds a chunk by setting its bit
-  // (seq_cst) and then checking the chunk's sequence. With the fence between
-  // this publisher's clearing of the sequence and its load of the holders,
-  // either the load sees the bit, or the subscriber sees the sequence
-  // cleared, takes its bit back and reads nothing: a bit the store wipes is
-  // one its owner clears anyway. Bits of dead subscribers, cleared by whoever
-  // reclaims them, are gone once they are. A batch that a subscriber's cursor
-  // kept, and holds later without a check (Cursor::hold), never lies in a
-  // chunk leaving the ring: the publisher waits for that cursor, or held the
-  // batch's chunks for the subscriber when it stopped waiting.
-  void evict(std::uint32_t old) noexcept {
+  // A chunk pushed out of the ring. If no subscriber holds it, it goes from
+  // the ring straight to this publisher's spare loans, else the last
+  // subscriber to let it go frees it. A subscriber holds a chunk by setting
+  // its bit (seq_cst), then checking the chunk's sequence; so the eviction
+  // clears the sequence, then either
+  // - (not `fenced`) takes the chunk by a read-modify-write of its holders:
+  //   a hold that lands after it finds the sequence cleared; or
+  // - (`fenced`: cleared and fenced before, after a batch's head) looks at the
+  //   holders and takes the chunk with a plain store, no read-modify-write
+  //   per sample. That is Dekker's: either the look sees the bit, or the
+  //   subscriber sees the sequence cleared, takes its bit back and reads
+  //   nothing, so a bit the store wipes is one its owner clears anyway (as
+  //   are a dead subscriber's, by whoever reclaims them). A batch that a
+  //   subscriber's cursor kept, and later holds without a check
+  //   (Cursor::hold), never lies in a chunk leaving the ring: the publisher
+  //   waits for that cursor, or held the batch's chunks for the subscriber
+  //   when it stopped waiting.
+  // One at a time, read-modify-writes per kLeavingMax samples measured
+  // faster than a fence for them.
+  void evict(std::uint32_t old, bool fenced) noexcept {
     auto& dropped = topic_->chunk(old);
-    if (!spare_.full() && dropped.holders.load(std::memory_order_acquire) == kRingBit) {
-      dropped.holders.store(kLoanBit, std::memory_order_relaxed);
-      keep_spare(old);
-      return;
+    if (!fenced) dropped.seq.store(kNotPublished, std::memory_order_relaxed);
+    if (!spare_.full()) {
+      auto only_ring = kRingBit;
+      if (fenced ? dropped.holders.load(std::memory_order_acquire) == kRingBit
+                 : dropped.holders.compare_exchange_strong(only_ring, kLoanBit, std::memory_order_acq_rel)) {
+        if (fenced) dropped.holders.store(kLoanBit, std::memory_order_relaxed);
+        keep_spare(old);
+        return;
+      }
     }
     dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
   }
