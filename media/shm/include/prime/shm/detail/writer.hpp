@@ -56,7 +56,7 @@ class Writer {
     h.light_publisher.store(light_ ? 1 : 0, std::memory_order_seq_cst);
     next_ = h.head.load();
     in_ring_.resize(h.capacity);
-    leaving_.reserve(h.capacity + kLeavingMax);
+    batch_leaving_.reserve(h.capacity + kLeavingMax);
     for (std::uint64_t i = 0; i < h.capacity; ++i) in_ring_[i] = RingEntry::chunk(topic_->ring(i).load());
   }
   Writer(const Writer&) = delete;
@@ -142,15 +142,22 @@ class Writer {
     }
     for (std::size_t i = 0; i < chunks.size(); ++i)
       topic_->ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
+    // The chunks these entries push out of the ring, and those still leaving
+    // from before: their samples cleared before the head, evicted after it.
+    while (const auto old = leaving_.pop()) batch_leaving_.push_back(*old);
     for (std::size_t i = 0; i < chunks.size(); ++i)
-      if (const auto old = std::exchange(in_ring_[topic_->ring_index(first + i)], chunks[i]); old != kNoChunk) leave(old);
+      if (const auto old = std::exchange(in_ring_[topic_->ring_index(first + i)], chunks[i]); old != kNoChunk) {
+        batch_leaving_.push_back(old);
+        prefetch_for_write(&topic_->chunk(old));
+      }
+    for (const auto old : batch_leaving_) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
     next_ = first + chunks.size();
-    clear_leaving();
     store_head(next_);
     // One fence for the batch's evictions (evict), not a read-modify-write
     // per sample: the head's store has just waited for the stores before it.
     std::atomic_thread_fence(std::memory_order_seq_cst);
-    evict_leaving(true);
+    for (const auto old : batch_leaving_) evict(old, true);
+    batch_leaving_.clear();
     wake_subscribers();
     claim_ahead();
   }
@@ -171,7 +178,6 @@ class Writer {
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
     store_head(seq + 1);
     if (const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk); old != kNoChunk) leave(old);
-    if (leaving_.size() >= kLeavingMax) evict_leaving();
     wake_subscribers();
     claim_ahead();
   }
@@ -237,27 +243,22 @@ class Writer {
     prefetch_for_write(topic_->payload(chunk));
   }
 
-  // A chunk pushed out of the ring. Its eviction waits for the batch's head,
-  // or until kLeavingMax have left, or until the spares run out: an eviction
-  // is a read-modify-write or follows a full fence (evict), either of which
-  // waits for every store before it to reach the other CPUs, the ring entry
-  // just stored on the line a subscriber polls among them. So it is one such
-  // wait per kLeavingMax samples, or one per batch. Until evicted, a chunk
-  // keeps its sequence and the ring's bit: a subscriber that looked it up in
-  // the ring before it was replaced may still take it.
+  // A chunk pushed out of the ring by publish(). Its eviction waits until
+  // kLeavingMax have left (or the next batch, or until the spares run out):
+  // an eviction is a read-modify-write (evict), which waits for every store
+  // before it to reach the other CPUs, the ring entry just stored on the
+  // line a subscriber polls among them. So it is one such wait per
+  // kLeavingMax samples, not per sample (a batch has one fence for all).
+  // Until evicted, a chunk keeps its sequence and the ring's bit: a
+  // subscriber that looked it up in the ring before it was replaced may
+  // still take it.
   void leave(std::uint32_t old) noexcept {
-    leaving_.push_back(old);
+    leaving_.push(old);
     prefetch_for_write(&topic_->chunk(old));
+    if (leaving_.size() == kLeavingMax) evict_leaving();
   }
-  // The leaving chunks carry their samples no more: before the full fence
-  // that a fenced eviction relies on.
-  void clear_leaving() noexcept {
-    for (const auto old : leaving_) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
-  }
-  // `fenced`: clear_leaving() and a full fence have come since the last chunk left.
-  void evict_leaving(bool fenced = false) noexcept {
-    for (const auto old : leaving_) evict(old, fenced);
-    leaving_.clear();
+  void evict_leaving() noexcept {
+    while (auto old = leaving_.pop()) evict(*old, false);
   }
 
   // A chunk pushed out of the ring. If no subscriber holds it, it goes from
@@ -479,9 +480,10 @@ class Writer {
   // ahead, or taken over as they left the ring. Bounded, so a publisher that
   // loans one at a time after a batch does not sit on many.
   Fifo<64> spare_;
-  // Out of the ring, not evicted yet (see leave): reserved for a batch as
-  // large as the ring, and as many as may be left from before.
-  std::vector<std::uint32_t> leaving_;
+  Fifo<kLeavingMax> leaving_;  // out of the ring, not evicted yet (see leave)
+  // A batch's (publish_some), and those leaving from before: reserved for
+  // a batch as large as the ring and kLeavingMax more.
+  std::vector<std::uint32_t> batch_leaving_;
   std::vector<std::uint32_t> in_ring_;  // the chunk each ring entry names, as this publisher wrote it
   std::uint64_t min_cursor_ = 0;    // the slowest subscriber's cursor when last looked at
   int idle_rings_ = 0;              // rings in a row that found a sleeper's bit but woke no one
