@@ -446,6 +446,46 @@ TEST_F(ShmTest, ABatchIsWrittenInPlaceAndReadInOneStepInOrderWithItsStamps) {
   EXPECT_EQ(reader.lost(), 0u);
 }
 
+// Every loan out takes a place in the ring: under block, a loan made while
+// others are out waits for the room their publishes take too, and loans
+// stop at the ring's capacity with an error that says so.
+TEST_F(ShmTest, EveryLoanOutTakesItsPlaceInTheRing) {
+  const shm::TopicQos qos{.capacity = 4, .overflow = Overflow::block, .block_timeout = 50ms, .max_held = 4};
+  auto publisher = core.publisher<int>("loans-out", qos);
+  auto reader = core.subscribe<int>("loans-out", {}, qos).subscribe();
+  auto errors = core.errors().subscribe();
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(publisher.publish(i));
+  auto last_place = publisher.loan();
+  ASSERT_TRUE(last_place);
+  EXPECT_FALSE(errors.try_read()) << "the ring had room for one more";
+  ASSERT_EQ(*reader.try_read()->value, 0);
+  auto freed_place = publisher.loan();  // the reader took sample 0: room for this one
+  ASSERT_TRUE(freed_place);
+  EXPECT_FALSE(errors.try_read()) << "the reader made room for the second loan";
+  auto batch = publisher.loan_some(4);
+  ASSERT_TRUE(batch);  // no room: waits 50 ms for the reader, then passes it over
+  EXPECT_TRUE(errors.try_read()) << "two loans out fill the ring: the batch had to wait";
+  EXPECT_EQ(batch->size(), 2u) << "the ring's other places are loaned out";
+  auto beyond = publisher.loan();
+  ASSERT_FALSE(beyond) << "4 loans out on a ring of 4";
+  EXPECT_EQ(beyond.error().code, Errc::limit_exceeded);
+  EXPECT_NE(beyond.error().message.find("all 4 places of its ring are loaned out"), std::string::npos)
+      << beyond.error().message;
+  **last_place = 3;
+  std::move(*last_place).publish();
+  **freed_place = 4;
+  std::move(*freed_place).publish();
+  (*batch)[0] = 5;
+  (*batch)[1] = 6;
+  std::move(*batch).publish();
+  for (int expected : {3, 4, 5, 6}) {  // passed over, the reader lost samples 1 and 2 to them
+    auto v = reader.try_read();
+    ASSERT_TRUE(v);
+    EXPECT_EQ(*v->value, expected);
+  }
+  EXPECT_EQ(reader.lost(), 2u);
+}
+
 TEST_F(ShmTest, ABatchIsAsLargeAsTheRingHasRoomForUnderBlock) {
   const shm::TopicQos qos{.capacity = 8, .overflow = Overflow::block, .block_timeout = 50ms, .max_held = 8};
   auto publisher = core.publisher<int>("room", qos);

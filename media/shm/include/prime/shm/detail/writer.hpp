@@ -72,16 +72,26 @@ class Writer {
 
   [[nodiscard]] const std::shared_ptr<Topic>& topic() const noexcept { return topic_; }
 
-  // A free chunk, held by this loan, once the ring has room for the next
-  // sequence: at once under drop_oldest; under block, when every live
-  // subscriber has taken the sample the next one overwrites. A subscriber
-  // that takes nothing for `block_timeout` is reported once and passed over
-  // from then on, like a drop_oldest reader, until it catches up.
+  // A free chunk, held by this loan, once the ring has room for it: at once
+  // under drop_oldest; under block, when every live subscriber has taken
+  // the sample it overwrites. Each loan out takes its place in the ring (its
+  // publish will overwrite one more sample), so loans stop at the ring's
+  // capacity. A subscriber that takes nothing for `block_timeout` is
+  // reported once and passed over from then on, like a drop_oldest reader,
+  // until it catches up.
   std::expected<std::uint32_t, Error> loan() {
     auto& h = topic_->header();
+    if (out_ >= h.capacity)
+      return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() + "': all " +
+                                                             std::to_string(h.capacity) +
+                                                             " places of its ring are loaned out; publish or drop a "
+                                                             "loan before taking another"});
     if (static_cast<Overflow>(h.overflow) == Overflow::block) wait_for_room();
     for (int pass = 0; pass < 2; ++pass) {
-      if (auto i = claim()) return *i;
+      if (auto i = claim()) {
+        ++out_;
+        return *i;
+      }
       if (topic_->reclaim_dead_subscribers() == 0) break;
     }
     // Subscribers keep to max_held, so this means a slot's owner broke the
@@ -93,9 +103,9 @@ class Writer {
   }
 
   // Up to `max` chunks at once, appended to `out`: the first as loan()
-  // gives it (waiting under block), then as many more as are free and, under
-  // block, as the ring has room for without waiting. Never more than the
-  // ring's capacity. The extra chunks are ones no subscriber holds, so
+  // gives it (waiting under block), then as many more as are free and as
+  // the ring has places for (under block, without waiting). Never more than
+  // the ring's capacity. The extra chunks are ones no subscriber holds, so
   // taking them costs no subscriber its max_held.
   std::expected<void, Error> loan_some(std::size_t max, std::vector<std::uint32_t>& out) {
     auto first = loan();
@@ -103,28 +113,36 @@ class Writer {
     out.push_back(*first);
     auto& h = topic_->header();
     const bool block = static_cast<Overflow>(h.overflow) == Overflow::block;
-    auto room = [&]() -> std::uint64_t {  // sequences publishable now: next_ + k - capacity <= min_cursor_
-      if (!block) return h.capacity;
-      return min_cursor_ + h.capacity > next_ ? std::min(h.capacity, min_cursor_ + h.capacity - next_) : 0;
+    auto room = [&]() -> std::uint64_t {  // more loans the ring has places for now (see wait_for_room)
+      const auto places = h.capacity - out_;
+      if (!block) return places;
+      const auto after = next_ + out_;
+      return std::min(places, min_cursor_ + h.capacity > after ? min_cursor_ + h.capacity - after : 0);
     };
-    auto can = std::min<std::uint64_t>(max, room());
-    if (can < max && block) {
+    auto more = std::min<std::uint64_t>(max - 1, room());
+    if (more < max - 1 && block) {
       min_cursor_ = std::min(slowest(), next_);  // a fresh look may find more room
-      can = std::min<std::uint64_t>(max, room());
+      more = std::min<std::uint64_t>(max - 1, room());
     }
-    for (std::uint64_t k = 1; k < can; ++k) {
+    for (std::uint64_t k = 0; k < more; ++k) {
       const auto chunk = claim();
       if (!chunk) break;
       out.push_back(*chunk);
+      ++out_;
     }
-    // The lines of their infos, on their way while the samples are written.
-    for (std::uint64_t k = 0; k < out.size(); k += kInfosPerLine) prefetch_for_write(&topic_->info(next_ + k));
-    prefetch_for_write(&topic_->info(next_ + out.size() - 1));
+    // The lines of their infos (published in order, the batch lands after
+    // the loans out before it), on their way while the samples are written.
+    const auto at = next_ + out_ - out.size();
+    for (std::uint64_t k = 0; k < out.size(); k += kInfosPerLine) prefetch_for_write(&topic_->info(at + k));
+    prefetch_for_write(&topic_->info(at + out.size() - 1));
     return {};
   }
 
   // Hands a loaned chunk back unpublished.
-  void discard(std::uint32_t chunk) noexcept { topic_->chunk(chunk).holders.fetch_and(~kLoanBit); }
+  void discard(std::uint32_t chunk) noexcept {
+    topic_->chunk(chunk).holders.fetch_and(~kLoanBit);
+    --out_;
+  }
 
   // Publishes loaned chunks of `size` bytes each as the next sequences, in
   // order, chunk i stamped stamp_of(i). Never waits. As publish() does, for
@@ -134,6 +152,7 @@ class Writer {
   template <class StampOf>
   void publish_some(std::span<const std::uint32_t> chunks, std::size_t size, StampOf&& stamp_of) noexcept {
     const auto first = next_;
+    out_ -= chunks.size();
     for (std::size_t i = 0; i < chunks.size(); ++i) {
       auto& c = topic_->chunk(chunks[i]);
       describe(c, first + i, size, stamp_of(i));
@@ -172,6 +191,7 @@ class Writer {
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
     auto& c = topic_->chunk(chunk);
     const auto seq = next_++;
+    --out_;
     describe(c, seq, size, stamp);
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
@@ -331,10 +351,13 @@ class Writer {
     topic_->reclaim_dead_subscribers();
   }
 
+  // Room for one more loan: its sample is published after those of the
+  // loans out already (out_ < capacity), as sequence next_ + out_.
   void wait_for_room() {
     auto& h = topic_->header();
-    if (next_ < h.capacity) return;
-    const auto needed = next_ + 1 - h.capacity;  // every waited-for subscriber must have taken this
+    const auto after = next_ + out_;
+    if (after < h.capacity) return;
+    const auto needed = after + 1 - h.capacity;  // every waited-for subscriber must have taken this
     if (min_cursor_ >= needed) return;
     // Capped at next_: a subscriber joining from now on starts at or after it.
     auto room = [&] { return (min_cursor_ = std::min(slowest(), next_)) >= needed; };
@@ -486,6 +509,7 @@ class Writer {
   std::vector<std::uint32_t> batch_leaving_;
   std::vector<std::uint32_t> in_ring_;  // the chunk each ring entry names, as this publisher wrote it
   std::uint64_t min_cursor_ = 0;    // the slowest subscriber's cursor when last looked at
+  std::uint64_t out_ = 0;           // chunks loaned, not yet published or handed back
   int idle_rings_ = 0;              // rings in a row that found a sleeper's bit but woke no one
 };
 
