@@ -81,6 +81,11 @@ struct Image {
 
 // Small ring, so the publisher laps slow readers all the time.
 inline constexpr shm::TopicQos kCheckedQos{.capacity = 4, .max_subscribers = 4, .max_held = 2};
+// The same under block, waiting 1 ms for a reader before passing it over: a
+// reader that stops for longer is lapped as under drop_oldest.
+inline constexpr shm::TopicQos kCheckedBlockQos{.capacity = 4, .overflow = Overflow::block,
+                                                .block_timeout = std::chrono::milliseconds{1}, .max_subscribers = 4,
+                                                .max_held = 2};
 inline constexpr shm::TopicQos kSequenceQos{.capacity = 256, .overflow = Overflow::block,
                                             .block_timeout = std::chrono::milliseconds{5000}};
 

@@ -12,8 +12,9 @@
 //   shm_peer receive  <domain> <topic> <count>                   subscribe, print, read count samples, print
 //   shm_peer sync     <domain> <seconds>                         sync two topics (max_held 4) into a chain and a collector
 //   shm_peer memory   <domain>                                   a topic too big for /dev/shm, then one that fits
-//   shm_peer checksum_publish <domain> <topic> <count> [batches] heavy overwrite of checksummed payloads
-//                     (batches: 1 to 4 at a time, loan_some)
+//   shm_peer checksum_publish <domain> <topic> <count> [batches|block_batches]
+//                     heavy overwrite of checksummed payloads (batches: 1 to 4 at a time, loan_some;
+//                     block_batches: the same on a block topic that passes a stopped reader over)
 //   shm_peer sequence_publish <domain> <topic> <count>           block: 0..count-1 as fast as possible
 //   shm_peer batch_publish <domain> <topic> <count>              the same in batches of 1 to 61 (loan_some)
 //   shm_peer leave_segments <domain> <topic>                     create a topic, print, sleep (to be killed)
@@ -233,8 +234,10 @@ int main(int argc, char** argv) {
     say("published 700");
     return 0;
   }
-  if (role == "checksum_publish" && (argc == 5 || (argc == 6 && std::string_view{argv[5]} == "batches"))) {
-    auto publisher = core.publisher<test::Checked>(topic, test::kCheckedQos);
+  if (role == "checksum_publish" &&
+      (argc == 5 || (argc == 6 && (std::string_view{argv[5]} == "batches" || std::string_view{argv[5]} == "block_batches")))) {
+    const bool block = argc == 6 && std::string_view{argv[5]} == "block_batches";
+    auto publisher = core.publisher<test::Checked>(topic, block ? test::kCheckedBlockQos : test::kCheckedQos);
     for (std::uint64_t i = 0, round = 0; i < arg(4); ++round) {
       if (argc == 6) {
         auto batch = publisher.loan_some(std::min<std::uint64_t>(1 + round % 4, arg(4) - i));

@@ -133,21 +133,24 @@ TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleLeavesADropOldestPublishe
 // Reads what a publisher process overwrites heavily, one sample at a time
 // or (`batches`) every sample available in one read_some; the publisher
 // publishes one at a time or (`published_in_batches`) up to a ring at once,
-// when the chunks leaving the ring are evicted after the head's fence.
-void expect_no_torn_sample(bool batches, bool published_in_batches = false) {
+// when the chunks leaving the ring are evicted after the head's fence. With
+// `block`, the reader is passed over whenever it stops, and lapped all the
+// same, while it holds what it reads and the publisher waits for it.
+void expect_no_torn_sample(bool batches, bool published_in_batches = false, bool block = false) {
   const auto domain = unique_domain("torn");
   shm::Core core{domain};
-  auto topic = core.subscribe<Checked>("checked", {}, kCheckedQos);
+  const auto qos = block ? kCheckedBlockQos : kCheckedQos;
+  auto topic = core.subscribe<Checked>("checked", {}, qos);
   auto reader = topic.subscribe();
   const MappedTopic mapped{domain, "checked"};
   std::vector<std::string> args{"checksum_publish", domain, "checked", "200000"};
-  if (published_in_batches) args.emplace_back("batches");
+  if (published_in_batches) args.emplace_back(block ? "block_batches" : "batches");
   PeerProcess publisher{args};
   std::uint64_t received = 0, torn = 0, last = 0;
   std::vector<Sample<shm::View<Checked>>> taken;
   auto next = [&]() -> std::optional<Sample<shm::View<Checked>>> {
     if (!batches) return reader.try_read();
-    if (taken.empty() && !reader.read_some(taken, kCheckedQos.max_held, Clock::now())) return std::nullopt;
+    if (taken.empty() && !reader.read_some(taken, qos.max_held, Clock::now())) return std::nullopt;
     auto s = std::move(taken.front());
     taken.erase(taken.begin());
     return s;
@@ -163,7 +166,7 @@ void expect_no_torn_sample(bool batches, bool published_in_batches = false) {
       if (received % 1000 == 0) {
         // Let the publisher lap this reader (a ring of 4): overwriting is
         // what the test is about, so it is made to happen, not hoped for.
-        const auto lap = s->value->seq + 3 * kCheckedQos.capacity;
+        const auto lap = s->value->seq + 3 * qos.capacity;
         MappedTopic::within(10s, [&] { return mapped.header().head.load() > lap || publisher.exit_code(0ms); });
       }
     }
@@ -182,6 +185,14 @@ TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwriteInBatches) { ex
 
 TEST(ShmProcesses, NoTornSampleIsEverDeliveredUnderHeavyOverwriteInBatchesToABatchReader) {
   expect_no_torn_sample(true, true);
+}
+
+TEST(ShmProcesses, NoTornSampleIsEverDeliveredWhenABlockPublisherInBatchesLapsAPassedOverReader) {
+  expect_no_torn_sample(false, true, true);
+}
+
+TEST(ShmProcesses, NoTornSampleIsEverDeliveredWhenABlockPublisherInBatchesLapsAPassedOverBatchReader) {
+  expect_no_torn_sample(true, true, true);
 }
 
 // A publisher process runs `role` (sequence_publish or batch_publish): this
