@@ -193,7 +193,10 @@ class Publisher {
   // A slot for the next message, default-initialised (not zeroed). On a
   // `block` topic it first waits for every subscriber to have room, except
   // one that read nothing for the block timeout: that one is reported on
-  // core.errors() and no longer waited for until it catches up.
+  // core.errors() and no longer waited for until it catches up. Every loan
+  // out (and every slot of a batch) takes its place in the ring: the room
+  // waited for is after theirs, and a loan beyond the ring's capacity is
+  // Errc::limit_exceeded.
   [[nodiscard]] std::expected<Loan<T>, Error> loan() requires(!std::is_same_v<T, Bytes>) {
     auto chunk = owner_->writer.loan();
     if (!chunk) return std::unexpected(std::move(chunk.error()));
