@@ -63,7 +63,7 @@ class Writer {
   Writer& operator=(const Writer&) = delete;
   ~Writer() {
     evict_leaving();
-    while (auto chunk = spare_.pop()) discard(*chunk);
+    while (auto chunk = spare_.pop()) let_go(*chunk);
     // After the last light store, which this seq_cst store makes visible first.
     topic_->header().light_publisher.store(0, std::memory_order_seq_cst);
     auto expected = me_;
@@ -140,7 +140,7 @@ class Writer {
 
   // Hands a loaned chunk back unpublished.
   void discard(std::uint32_t chunk) noexcept {
-    topic_->chunk(chunk).holders.fetch_and(~kLoanBit);
+    let_go(chunk);
     --out_;
   }
 
@@ -228,6 +228,9 @@ class Writer {
       h.head.store(head, std::memory_order_seq_cst);
     }
   }
+
+  // This publisher's hold on a chunk (a loan's, or a spare's) ends.
+  void let_go(std::uint32_t chunk) noexcept { topic_->chunk(chunk).holders.fetch_and(~kLoanBit); }
 
   // A loaned chunk passes from the loan to the ring. No subscriber holds it
   // (it was free, or left the ring unheld, when it was loaned), so a plain
