@@ -486,6 +486,42 @@ TEST_F(ShmTest, EveryLoanOutTakesItsPlaceInTheRing) {
   EXPECT_EQ(reader.lost(), 2u);
 }
 
+// Under drop_oldest a loan's publish overwrites nothing a subscriber must
+// have taken: a publisher may keep more loans out than the ring holds
+// (double buffering on a ring of one), as long as the topic has chunks to
+// spare, and is told so when it has none.
+TEST_F(ShmTest, UnderDropOldestLoansOutAreBoundedByTheChunksNotTheRing) {
+  const shm::TopicQos qos{.capacity = 1, .max_subscribers = 1, .max_held = 1};
+  auto publisher = core.publisher<int>("double-buffer", qos);
+  auto reader = core.subscribe<int>("double-buffer", {}, qos).subscribe();
+  auto front = publisher.loan();
+  auto back = publisher.loan();
+  ASSERT_TRUE(front && back) << "two loans out on a ring of one";
+  **front = 1;
+  **back = 2;
+  std::move(*front).publish();
+  std::move(*back).publish();
+  auto latest = reader.try_read();
+  ASSERT_TRUE(latest);
+  EXPECT_EQ(*latest->value, 2);
+  EXPECT_EQ(reader.lost(), 1u);
+  latest.reset();
+  std::vector<shm::Loan<int>> out;
+  std::optional<Error> refused;
+  while (!refused) {
+    auto loan = publisher.loan();
+    if (loan) out.push_back(std::move(*loan));
+    else refused = loan.error();
+    ASSERT_LE(out.size(), 8u) << "the topic has 4 chunks";
+  }
+  EXPECT_GE(out.size(), 2u);
+  EXPECT_EQ(refused->code, Errc::limit_exceeded);
+  EXPECT_NE(refused->message.find("this publisher has " + std::to_string(out.size()) + " loaned out"), std::string::npos)
+      << refused->message;
+  out.pop_back();  // dropped unpublished: its chunk is free again
+  EXPECT_TRUE(publisher.loan());
+}
+
 TEST_F(ShmTest, ABatchIsAsLargeAsTheRingHasRoomForUnderBlock) {
   const shm::TopicQos qos{.capacity = 8, .overflow = Overflow::block, .block_timeout = 50ms, .max_held = 8};
   auto publisher = core.publisher<int>("room", qos);

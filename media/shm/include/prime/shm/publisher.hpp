@@ -193,10 +193,11 @@ class Publisher {
   // A slot for the next message, default-initialised (not zeroed). On a
   // `block` topic it first waits for every subscriber to have room, except
   // one that read nothing for the block timeout: that one is reported on
-  // core.errors() and no longer waited for until it catches up. Every loan
-  // out (and every slot of a batch) takes its place in the ring: the room
-  // waited for is after theirs, and a loan beyond the ring's capacity is
-  // Errc::limit_exceeded.
+  // core.errors() and no longer waited for until it catches up. There,
+  // every loan out (and every slot of a batch) takes its place in the ring:
+  // the room waited for is after theirs, and a loan beyond the ring's
+  // capacity is Errc::limit_exceeded. Under drop_oldest, loans are bounded
+  // by the topic's spare chunks (Errc::limit_exceeded, saying how many are out).
   [[nodiscard]] std::expected<Loan<T>, Error> loan() requires(!std::is_same_v<T, Bytes>) {
     auto chunk = owner_->writer.loan();
     if (!chunk) return std::unexpected(std::move(chunk.error()));

@@ -74,19 +74,20 @@ class Writer {
 
   // A free chunk, held by this loan, once the ring has room for it: at once
   // under drop_oldest; under block, when every live subscriber has taken
-  // the sample it overwrites. Each loan out takes its place in the ring (its
-  // publish will overwrite one more sample), so loans stop at the ring's
-  // capacity. A subscriber that takes nothing for `block_timeout` is
-  // reported once and passed over from then on, like a drop_oldest reader,
-  // until it catches up.
+  // the sample it overwrites. Under block each loan out takes its place in
+  // the ring (its publish will overwrite one more sample a subscriber must
+  // have taken), so loans stop at the ring's capacity. A subscriber that
+  // takes nothing for `block_timeout` is reported once and passed over from
+  // then on, like a drop_oldest reader, until it catches up.
   std::expected<std::uint32_t, Error> loan() {
     auto& h = topic_->header();
-    if (out_ >= h.capacity)
+    const bool block = static_cast<Overflow>(h.overflow) == Overflow::block;
+    if (block && out_ >= h.capacity)
       return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() + "': all " +
                                                              std::to_string(h.capacity) +
                                                              " places of its ring are loaned out; publish or drop a "
                                                              "loan before taking another"});
-    if (static_cast<Overflow>(h.overflow) == Overflow::block) wait_for_room();
+    if (block) wait_for_room();
     for (int pass = 0; pass < 2; ++pass) {
       if (auto i = claim()) {
         ++out_;
@@ -94,8 +95,15 @@ class Writer {
       }
       if (topic_->reclaim_dead_subscribers() == 0) break;
     }
-    // Subscribers keep to max_held, so this means a slot's owner broke the
-    // rule (a foreign or corrupted participant): say so rather than guess.
+    // The topic keeps a chunk for one loan beyond what the ring and every
+    // subscriber's max_held take. With none out, running short means a
+    // slot's owner broke that rule (a foreign or corrupted participant).
+    if (out_ > 0)
+      return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() +
+                                                             "': no chunk is free for another loan: this publisher has " +
+                                                             std::to_string(out_) +
+                                                             " loaned out and the ring and subscribers hold the rest; "
+                                                             "publish or drop a loan before taking another"});
     return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() + "': all " +
                                                            std::to_string(h.chunk_count) +
                                                            " chunks are in use; a subscriber holds more than max_held (" +
@@ -114,7 +122,7 @@ class Writer {
     auto& h = topic_->header();
     const bool block = static_cast<Overflow>(h.overflow) == Overflow::block;
     auto room = [&]() -> std::uint64_t {  // more loans the ring has places for now (see wait_for_room)
-      const auto places = h.capacity - out_;
+      const auto places = h.capacity > out_ ? h.capacity - out_ : 0;  // out_ passes it only under drop_oldest
       if (!block) return places;
       const auto after = next_ + out_;
       return std::min(places, min_cursor_ + h.capacity > after ? min_cursor_ + h.capacity - after : 0);
