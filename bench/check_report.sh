@@ -15,7 +15,7 @@ csv="$out/figures.csv"
 [[ -s "$csv" ]] || fail "no figures.csv"
 [[ "$(head -1 "$csv")" == "who,scenario,payload,statistic,value,unit" ]] || fail "figures.csv has no header"
 for row in "Floor,latency,64,p50," "Shm,latency,64,p50," "Shm,latency,64,p99.9," "Shm,latency,1048576,max," \
-           "Shm,throughput,64,rate," "ShmService,round-trip,64,p50," "FutexWake,latency-sleeping,64,p50," \
+           "Shm,throughput,64,rate," "SpscFloor256,throughput,64,rate," "ShmService,round-trip,64,p50," "FutexWake,latency-sleeping,64,p50," \
            "For,table1-1lane,100,per hop," "Liberty,table1-1lane,100,per hop," \
            "Shm,fanout-throughput-1,64,rate," "Shm,fanout-publish-4,64,publish," \
            "ShmBatch,publisher-alone,64,rate,"; do

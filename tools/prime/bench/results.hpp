@@ -55,7 +55,9 @@ struct Results {
 
 // Roles in the comparisons: Prime's own media, the floors a medium cannot
 // beat, and the peers a user would pick instead.
-inline bool is_floor(const std::string& who) { return who == "Floor" || who == "FutexWake" || who == "SpscFloor"; }
+inline bool is_floor(const std::string& who) {
+  return who == "Floor" || who == "FutexWake" || who == "SpscFloor" || who == "SpscFloor256";
+}
 inline bool is_prime(const std::string& who) {
   return who.starts_with("Shm") || who == "Optimus" || who == "Radiant" || who == "Liberty" || who.starts_with("Sources");
 }

@@ -161,7 +161,7 @@ std::vector<Suite> suites() {
       {.name = "ipc",
        .title = "two processes: Shm, its services and their peers",
        .binary = "ipc/prime_ipc",
-       .quick_filter = "^BM_(Latency|Throughput|RoundTrip|PublisherAlone)_[A-Za-z]+/(64|1048576)/"
+       .quick_filter = "^BM_(Latency|Throughput|RoundTrip|PublisherAlone)_[A-Za-z]+[0-9]*/(64|1048576)/"
                        "|^BM_Calls_ShmService/1/|^BM_FanOut(Throughput|Publish)?_Shm/[14]/|^BM_Loaded_|^BM_Sleeping_Shm/1000/",
        .quick_min_time = 0.05,
        .full_min_time = 0.2,
