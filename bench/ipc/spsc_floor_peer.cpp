@@ -9,10 +9,10 @@
 //
 // SpscFloor256: the same ring, ipc::kStreamDepth (256) slots deep: as deep
 // as Shm's topics and the iceoryx, Fast DDS and POSIX queue peers' queues in
-// these benchmarks. A ring's rate depends on its depth (measured on a 2-vCPU VM:
-// 19 M msgs/s at 256 slots, 28 M at 1024, 57 M at 4096), so this is the
-// floor for a queue as deep as the ones measured against it; SpscFloor,
-// 4096 deep, is the machine's.
+// these benchmarks. A ring's rate depends on its depth (measured on the
+// 2-vCPU development VM: about 20 M msgs/s at 256 slots, 25 M at 1024,
+// 60-120 M at 4096), so this is the floor for a queue as deep as the ones
+// measured against it; SpscFloor, 4096 deep, is the machine's.
 //
 //   Throughput  the child writes seq = 1, 2, 3... into the slots as fast as
 //               the ring has room; the parent takes one per iteration and
