@@ -60,8 +60,10 @@ void produce(ipc::Child& self) {
   }
 }
 constexpr std::uint64_t kMachineDepth = 4096;
-const ipc::ChildEntry kProduce{"SpscFloor.produce", produce<kMachineDepth>};
-const ipc::ChildEntry kProduceAtStreamDepth{"SpscFloor256.produce", produce<ipc::kStreamDepth>};
+constexpr const char* kProducer = "SpscFloor.produce";
+constexpr const char* kProducerAtStreamDepth = "SpscFloor256.produce";
+const ipc::ChildEntry kProduce{kProducer, produce<kMachineDepth>};
+const ipc::ChildEntry kProduceAtStreamDepth{kProducerAtStreamDepth, produce<ipc::kStreamDepth>};
 
 template <std::uint64_t kSlots>
 void throughput(benchmark::State& state, const char* producer) {
@@ -94,9 +96,9 @@ void throughput(benchmark::State& state, const char* producer) {
     child.stop();
   });
 }
-void BM_Throughput_SpscFloor(benchmark::State& state) { throughput<kMachineDepth>(state, "SpscFloor.produce"); }
+void BM_Throughput_SpscFloor(benchmark::State& state) { throughput<kMachineDepth>(state, kProducer); }
 void BM_Throughput_SpscFloor256(benchmark::State& state) {
-  throughput<ipc::kStreamDepth>(state, "SpscFloor256.produce");
+  throughput<ipc::kStreamDepth>(state, kProducerAtStreamDepth);
 }
 BENCHMARK(BM_Throughput_SpscFloor)->Arg(64)->UseRealTime();
 BENCHMARK(BM_Throughput_SpscFloor256)->Arg(64)->UseRealTime();

@@ -7,6 +7,7 @@
 #include <limits>
 #include <optional>
 #include <sstream>
+#include <utility>
 
 namespace prime::tool::bench {
 
@@ -325,6 +326,11 @@ std::string headline(const Results& r) {
     }
     return best;
   };
+  // The throughput floors: the machine's, and a ring as deep as the topics.
+  const std::pair<std::string, std::optional<double>> spsc{"SPSC ring floor",
+                                                           r.find("SpscFloor", "throughput", 64, "rate")};
+  const std::pair<std::string, std::optional<double>> spsc_as_deep{
+      "SPSC ring as deep as the topic (256)", r.find("SpscFloor256", "throughput", 64, "rate")};
   for (const std::int64_t payload : {std::int64_t{64}, std::int64_t{1} << 20})
     row("Shm one-way latency, " + size_text(payload) + ", p50", p50("Shm", "latency", payload), false,
         {{"cache-line floor", p50("Floor", "latency", payload)},
@@ -334,32 +340,26 @@ std::string headline(const Results& r) {
       {{"futex wake floor", p50("FutexWake", "latency-sleeping", 64)},
        {"iceoryx (WaitSet)", p50("IceoryxWaitSet", "latency-sleeping", 64)}});
   row("Shm lossless throughput, 64 B (sensor's stamp)", r.find("Shm", "throughput", 64, "rate"), true,
-      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
-       {"SPSC ring as deep as the topic (256)", r.find("SpscFloor256", "throughput", 64, "rate")},
+      {spsc, spsc_as_deep,
        {"iceoryx", r.find("Iceoryx", "throughput", 64, "rate")},
        {"Fast DDS", fast_dds("throughput", 64, true)}});
   row("Shm lossless throughput, publisher's PublishFence::light, 64 B", r.find("ShmLight", "throughput", 64, "rate"), true,
-      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
-       {"Shm with full fences", r.find("Shm", "throughput", 64, "rate")}});
+      {spsc, {"Shm with full fences", r.find("Shm", "throughput", 64, "rate")}});
   row("Shm lossless throughput, publisher reading the clock for each stamp (publish()'s default), 64 B",
       r.find("ShmClock", "throughput", 64, "rate"), true,
       {{"with the sensor's stamp", r.find("Shm", "throughput", 64, "rate")}});
   row("Shm lossless throughput in batches (loan_some / read_some), 64 B", r.find("ShmBatch", "throughput", 64, "rate"), true,
-      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
-       {"SPSC ring as deep as the topic (256)", r.find("SpscFloor256", "throughput", 64, "rate")},
+      {spsc, spsc_as_deep,
        {"Shm one at a time", r.find("Shm", "throughput", 64, "rate")}});
   row("Shm lossless throughput in batches read as Views (loan_some / BatchReader), 64 B",
       r.find("ShmViews", "throughput", 64, "rate"), true,
-      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
-       {"SPSC ring as deep as the topic (256)", r.find("SpscFloor256", "throughput", 64, "rate")},
+      {spsc, spsc_as_deep,
        {"read_some", r.find("ShmBatch", "throughput", 64, "rate")}});
   row("Shm publisher alone, in batches (one process, nobody reading: its own bookkeeping), 64 B",
       r.find("ShmBatch", "publisher-alone", 64, "rate"), true,
-      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
-       {"Views across processes", r.find("ShmViews", "throughput", 64, "rate")}});
+      {spsc, {"Views across processes", r.find("ShmViews", "throughput", 64, "rate")}});
   row("Shm publisher alone, one at a time, 64 B", r.find("Shm", "publisher-alone", 64, "rate"), true,
-      {{"SPSC ring floor", r.find("SpscFloor", "throughput", 64, "rate")},
-       {"Shm across processes", r.find("Shm", "throughput", 64, "rate")}});
+      {spsc, {"Shm across processes", r.find("Shm", "throughput", 64, "rate")}});
   row("Shm publish to 4 reader processes, 64 B (publisher's time per message)",
       r.find("Shm", "fanout-publish-4", 64, "publish"), false,
       {{"1 reader", r.find("Shm", "fanout-publish-1", 64, "publish")},
