@@ -3,7 +3,8 @@
 // wait for it and kill it at a known point.
 //
 //   shm_peer publish  <domain> <topic> <first> <count> <capacity> <block|drop>
-//   shm_peer loan_and_hang <domain> <topic> <count> <capacity>   publish count, then loan, print, sleep
+//   shm_peer loan_and_hang <domain> <topic> <count> <capacity> [light]
+//                     publish count (with PublishFence::light: light), then loan, print, sleep
 //   shm_peer hold     <domain> <topic> <capacity> <block|drop>   subscribe, take one sample, print, sleep
 //   shm_peer sleep    <domain> <topic>                           subscribe (spin 0), print, wait asleep for a sample
 //   shm_peer stuck    <domain> <topic> <capacity>                subscribe to a block topic, print, never read
@@ -107,8 +108,9 @@ int main(int argc, char** argv) {
     say("published");
     return 0;
   }
-  if (role == "loan_and_hang" && argc == 6) {
-    auto publisher = core.publisher<std::uint64_t>(topic, {.capacity = arg(5)});
+  if (role == "loan_and_hang" && (argc == 6 || argc == 7)) {
+    const auto fence = argc == 7 && std::string{argv[6]} == "light" ? shm::PublishFence::light : shm::PublishFence::full;
+    auto publisher = core.publisher<std::uint64_t>(topic, {.capacity = arg(5), .publish_fence = fence});
     for (std::uint64_t i = 0; i < arg(4); ++i) (void)publisher.publish(i);
     auto loan = publisher.loan();
     if (!loan) fail(loan.error().describe());

@@ -60,18 +60,21 @@ TEST(ShmProcesses, APublisherKilledMidLoanLeavesSubscribersRunningAndARestartedO
   EXPECT_EQ(reader.lost(), 0u);
 }
 
-// A publisher killed with chunks on their way out of the ring (given back
-// several at a time) strands none: its successor's recovery frees them.
-TEST(ShmProcesses, APublisherKilledWhileChunksLeaveTheRingStrandsNone) {
+// A publisher killed with chunks on their way out of the ring strands none:
+// its successor's recovery frees them. A light publisher gives them back
+// several at a time, so some have left the ring but still hold its bit; a
+// full one evicts each at once, to its spares, which hold its loan bit.
+void expect_a_publisher_killed_with_chunks_leaving_to_strand_none(const std::string& fence) {
   const auto domain = unique_domain("killed-leaving");
   shm::Core core{domain};
   const shm::TopicQos qos{.capacity = 4};
   auto reader = core.subscribe<std::uint64_t>("odom", {}, qos).subscribe();
-  PeerProcess first{{"loan_and_hang", domain, "odom", "103", "4"}};
+  PeerProcess first{{"loan_and_hang", domain, "odom", "103", "4", fence}};
   ASSERT_TRUE(first.says("loaned"));
   const MappedTopic mapped{domain, "odom"};
   const auto at_kill = mapped.census();
-  ASSERT_GT(at_kill.ring_only, 4u) << "chunks out of the ring, not yet given back, when it dies";
+  if (fence == "light") ASSERT_GT(at_kill.ring_only, 4u) << "chunks out of the ring, not yet given back, when it dies";
+  else ASSERT_GT(at_kill.other, 1u) << "spares taken from the ring, and the loan, when it dies";
   EXPECT_GT(at_kill.other, 0u) << "the loan, at least";
   first.kill9();
   {
@@ -81,6 +84,14 @@ TEST(ShmProcesses, APublisherKilledWhileChunksLeaveTheRingStrandsNone) {
   const auto census = mapped.census();
   EXPECT_EQ(census.ring_only, 4u);
   EXPECT_EQ(census.other, 0u) << "no chunk is left held by the dead publisher";
+}
+
+TEST(ShmProcesses, ALightPublisherKilledWhileChunksLeaveTheRingStrandsNone) {
+  expect_a_publisher_killed_with_chunks_leaving_to_strand_none("light");
+}
+
+TEST(ShmProcesses, AFullPublisherKilledWithChunksTakenFromTheRingStrandsNone) {
+  expect_a_publisher_killed_with_chunks_leaving_to_strand_none("full");
 }
 
 // `how`: the holder takes one view ("view") or a batch the cursor keeps ("views").

@@ -179,10 +179,11 @@ class Writer {
       }
     for (const auto old : batch_leaving_) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
     next_ = first + chunks.size();
-    store_head(next_);
+    const bool full = fences_fully();
+    store_head(next_, full);
     // One fence for the batch's evictions (evict), not a read-modify-write
-    // per sample: the head's store has just waited for the stores before it.
-    std::atomic_thread_fence(std::memory_order_seq_cst);
+    // per sample.
+    fence_after_head(full);
     for (const auto old : batch_leaving_) evict(old, true);
     batch_leaving_.clear();
     wake_subscribers();
@@ -195,7 +196,10 @@ class Writer {
   // a sleeping one looks at; store_head orders it before the look for
   // sleepers), so a subscriber that sees the head finds the entry, and a
   // publisher killed in between leaves a head no later than the ring (see
-  // recover). Then the chunk the entry pushed out of the ring is let go.
+  // recover). Then the chunk the entry pushed out of the ring is let go:
+  // after a full head store, evicted at once, as a batch's are (its
+  // sequence cleared before the store, whose fence serves the eviction);
+  // after a light one, with others later (leave).
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
     auto& c = topic_->chunk(chunk);
     const auto seq = next_++;
@@ -204,8 +208,18 @@ class Writer {
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
-    store_head(seq + 1);
-    if (const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk); old != kNoChunk) leave(old);
+    const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk);
+    const bool full = fences_fully();
+    if (full && old != kNoChunk) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
+    store_head(seq + 1, full);
+    if (old != kNoChunk) {
+      if (full) {
+        fence_after_head(true);
+        evict(old, true);
+      } else {
+        leave(old);
+      }
+    }
     wake_subscribers();
     claim_ahead();
   }
@@ -223,18 +237,39 @@ class Writer {
     info.stamp.store(ticks, std::memory_order_release);
   }
 
+  // Whether the next head store fences fully: always, but for a light
+  // publisher no subscriber asked for full fences.
+  [[nodiscard]] bool fences_fully() const noexcept {
+    return !light_ || topic_->header().full_fences_wanted.load(std::memory_order_relaxed) != 0;
+  }
+
   // The head, ordered before the look for sleepers that follows it (in
-  // wake_subscribers): by a full fence, which waits for this publish's
-  // stores to reach the subscribers' CPUs; or, for a light publisher no
-  // subscriber asked for full fences, by the light half of an asymmetric one.
-  void store_head(std::uint64_t head) noexcept {
+  // wake_subscribers): by a full fence (`full`), which waits for this
+  // publish's stores to reach the subscribers' CPUs; or by the light half
+  // of an asymmetric one.
+  void store_head(std::uint64_t head, bool full) noexcept {
     auto& h = topic_->header();
-    if (light_ && h.full_fences_wanted.load(std::memory_order_relaxed) == 0) {
+    if (full) {
+      h.head.store(head, std::memory_order_seq_cst);
+    } else {
       h.head.store(head, std::memory_order_release);
       light_fence();
-    } else {
-      h.head.store(head, std::memory_order_seq_cst);
     }
+  }
+
+  // A full fence after store_head(`full`): every store before the head's
+  // reaches the other CPUs before any load after it. Free after a full
+  // store on x86, where a seq_cst store is a full barrier already (a locked
+  // exchange, or a store and mfence): a fence there would be a second
+  // locked instruction per publish.
+  static void fence_after_head(bool full) noexcept {
+#if defined(__x86_64__) || defined(__i386__)
+    if (full) {
+      std::atomic_signal_fence(std::memory_order_seq_cst);
+      return;
+    }
+#endif
+    std::atomic_thread_fence(std::memory_order_seq_cst);
   }
 
   // This publisher's hold on a chunk (a loan's, or a spare's) ends.
@@ -274,12 +309,13 @@ class Writer {
     prefetch_for_write(topic_->payload(chunk));
   }
 
-  // A chunk pushed out of the ring by publish(). Its eviction waits until
-  // kLeavingMax have left (or the next batch, or until the spares run out):
-  // an eviction is a read-modify-write (evict), which waits for every store
-  // before it to reach the other CPUs, the ring entry just stored on the
-  // line a subscriber polls among them. So it is one such wait per
-  // kLeavingMax samples, not per sample (a batch has one fence for all).
+  // A chunk pushed out of the ring by a light publish(). Its eviction waits
+  // until kLeavingMax have left (or the next batch, or until the spares run
+  // out): an eviction is then a read-modify-write (evict), which waits for
+  // every store before it to reach the other CPUs, the ring entry just
+  // stored on the line a subscriber polls among them. So it is one such
+  // wait per kLeavingMax samples, not per sample (a batch has one fence for
+  // all, a full publish() its head store's).
   // Until evicted, a chunk keeps its sequence and the ring's bit: a
   // subscriber that looked it up in the ring before it was replaced may
   // still take it.
@@ -299,18 +335,18 @@ class Writer {
   // clears the sequence, then either
   // - (not `fenced`) takes the chunk by a read-modify-write of its holders:
   //   a hold that lands after it finds the sequence cleared; or
-  // - (`fenced`: cleared and fenced before, after a batch's head) looks at the
-  //   holders and takes the chunk with a plain store, no read-modify-write
-  //   per sample. That is Dekker's: either the look sees the bit, or the
-  //   subscriber sees the sequence cleared, takes its bit back and reads
-  //   nothing, so a bit the store wipes is one its owner clears anyway (as
-  //   are a dead subscriber's, by whoever reclaims them). A batch that a
-  //   subscriber's cursor kept, and later holds without a check
-  //   (Cursor::hold), never lies in a chunk leaving the ring: the publisher
-  //   waits for that cursor, or held the batch's chunks for the subscriber
-  //   when it stopped waiting.
-  // One at a time, read-modify-writes per kLeavingMax samples measured
-  // faster than a fence for them.
+  // - (`fenced`: cleared before the head of a batch or full publish, fenced
+  //   after it) looks at the holders and takes the chunk with a plain
+  //   store, no read-modify-write per sample. That is Dekker's: either the
+  //   look sees the bit, or the subscriber sees the sequence cleared, takes
+  //   its bit back and reads nothing, so a bit the store wipes is one its
+  //   owner clears anyway (as are a dead subscriber's, by whoever reclaims
+  //   them). A batch that a subscriber's cursor kept, and later holds
+  //   without a check (Cursor::hold), never lies in a chunk leaving the
+  //   ring: the publisher waits for that cursor, or held the batch's chunks
+  //   for the subscriber when it stopped waiting.
+  // A light publisher, one at a time, evicts by read-modify-writes per
+  // kLeavingMax samples: measured faster than a fence for them.
   void evict(std::uint32_t old, bool fenced) noexcept {
     auto& dropped = topic_->chunk(old);
     if (!fenced) dropped.seq.store(kNotPublished, std::memory_order_relaxed);
