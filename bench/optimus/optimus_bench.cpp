@@ -16,6 +16,9 @@
 //                                Prime's (t, d of the same size), untrimmed:
 //                                the most XADDs this server takes, the peer of
 //                                PublishPipelined (which also trims its stream)
+//   BM_RedisBenchmark_XaddPipelinedOneClient  the same with one client (`-c 1`):
+//                                one batch in flight, its replies read before
+//                                the next is sent, as publish_all does
 //
 // The binary starts its own redis-server (persistence off) on a free loopback port.
 #include <benchmark/benchmark.h>
@@ -225,13 +228,15 @@ std::expected<double, std::string> redis_benchmark(const std::string& args) {
   return std::stod(text.substr(colon + 2, at - colon - 2));
 }
 
-void BM_RedisBenchmark_XaddPipelined(benchmark::State& state) {
+// redis-benchmark appending `requests` entries like Prime's for an Imu (a
+// stamp, the encoded value) from `clients` clients, each pipelining
+// `pipeline` XADDs: each iteration one run of it.
+void redis_benchmark_xadd(benchmark::State& state, int clients) {
   const auto pipeline = state.range(0);
   constexpr int kRequests = 100000;
-  // An entry as Prime writes one for an Imu: a stamp, the encoded value.
   const std::string entry = "t 1000000000000 d " + std::string(57, 'x');
-  const std::string args = "-P " + std::to_string(pipeline) + " -n " + std::to_string(kRequests) +
-                           " XADD bench-xadd '*' " + entry;
+  const std::string args = "-c " + std::to_string(clients) + " -P " + std::to_string(pipeline) + " -n " +
+                           std::to_string(kRequests) + " XADD bench-xadd '*' " + entry;
   for (auto _ : state) {
     const auto rate = redis_benchmark(args);
     if (!rate) {
@@ -243,7 +248,12 @@ void BM_RedisBenchmark_XaddPipelined(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * kRequests);
   (void)connect().command({"DEL", "bench-xadd"});
 }
+
+void BM_RedisBenchmark_XaddPipelined(benchmark::State& state) { redis_benchmark_xadd(state, 50); }
 BENCHMARK(BM_RedisBenchmark_XaddPipelined)->Arg(64)->UseManualTime()->Iterations(3);
+
+void BM_RedisBenchmark_XaddPipelinedOneClient(benchmark::State& state) { redis_benchmark_xadd(state, 1); }
+BENCHMARK(BM_RedisBenchmark_XaddPipelinedOneClient)->Arg(64)->UseManualTime()->Iterations(3);
 
 }  // namespace
 
