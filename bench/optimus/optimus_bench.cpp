@@ -10,6 +10,8 @@
 //   BM_Optimus_CallerRouted2     the same two services, called one after the other
 //   BM_Optimus_Publish           a source's values appended one round trip each
 //   BM_Optimus_PublishPipelined  the same in batches of 64, one round trip per batch
+//   BM_Optimus_PublishStreamed   the same streamed: one batch in flight while the
+//                                next is sent (StreamingPublisher)
 //   BM_Optimus_SourceThroughput  batches published and read back by a reader
 //   BM_RedisBenchmark_XaddPipelined  the server's own tool, `redis-benchmark
 //                                -P 64` (50 clients), appending entries like
@@ -191,6 +193,24 @@ void BM_Optimus_PublishPipelined(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(batch_size));
 }
 BENCHMARK(BM_Optimus_PublishPipelined)->Arg(64)->UseRealTime();
+
+void BM_Optimus_PublishStreamed(benchmark::State& state) {
+  prime::optimus::Core core{options("streamed")};
+  auto pub = core.publisher<Imu>("imu", {.capacity = 4096});
+  auto stream = pub.streaming();
+  const auto batch_size = static_cast<std::size_t>(state.range(0));
+  std::vector<prime::Sample<Imu>> batch(batch_size, prime::Sample<Imu>{Imu{}, prime::Clock::now()});
+  for (auto _ : state) {
+    for (auto& s : batch) ++s.value.sequence;
+    if (!stream.publish_all(batch)) {
+      state.SkipWithError("publish_all failed");
+      break;
+    }
+  }
+  if (!stream.flush()) state.SkipWithError("the last batch failed");
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(batch_size));
+}
+BENCHMARK(BM_Optimus_PublishStreamed)->Arg(64)->UseRealTime();
 
 void BM_Optimus_SourceThroughput(benchmark::State& state) {
   prime::optimus::Core core{options("throughput")};

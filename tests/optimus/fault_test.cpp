@@ -121,5 +121,43 @@ TEST_F(OptimusFault, BatchesBeginTheStreamAgainAfterARestartAndTheReaderFollows)
   EXPECT_EQ(reader.lost(), 0u);
 }
 
+// A batch in flight when the server died: flush says so (no hang), and the
+// publisher streams again once the server is back, beginning the stream
+// anew.
+TEST_F(OptimusFault, AStreamingPublisherWhoseServerDiedSaysSoAndStreamsAgainAfterARestart) {
+  RedisServer redis;
+  optimus::Core core{optimus::Options{.url = redis.url(), .domain = domain}};
+  auto pub = core.publisher<int>("imu", {.capacity = 1000});
+  auto reader = pub.source().subscribe({.capacity = 1000});
+  auto stream = pub.streaming();
+  std::vector<Sample<int>> batch;
+  for (int i = 0; i < 300; ++i) batch.push_back({i, Clock::now()});
+  const std::span values{batch};
+  ASSERT_TRUE(stream.publish_all(values.first(100)));
+  ASSERT_TRUE(stream.flush());
+  ASSERT_EQ(reader.read_all().size(), 100u);
+
+  redis.kill();
+  (void)stream.publish_all(values.subspan(100, 100));  // sent, or not, into a dead connection
+  auto flushed = stream.flush();
+  ASSERT_FALSE(flushed);
+  EXPECT_EQ(flushed.error().code, Errc::unreachable);
+  EXPECT_NE(flushed.error().message.find("source 'imu'"), std::string::npos) << flushed.error().message;
+  EXPECT_NE(flushed.error().message.find("100 values of the last batch may not all have been appended"), std::string::npos)
+      << flushed.error().message;
+
+  redis.start();
+  ASSERT_TRUE(eventually([&] { return stream.publish_all(values.last(100)).has_value() && stream.flush().has_value(); }, 10s));
+  std::vector<int> got;
+  ASSERT_TRUE(eventually(
+      [&] {
+        for (auto& s : reader.read_all()) got.push_back(s.value);
+        return got.size() >= 100;
+      },
+      10s));
+  ASSERT_GE(got.size(), 100u);
+  for (std::size_t i = 0; i < 100; ++i) EXPECT_EQ(got[got.size() - 100 + i], 200 + static_cast<int>(i)) << "in order";
+}
+
 }  // namespace
 }  // namespace prime::test

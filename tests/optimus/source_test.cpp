@@ -149,6 +149,100 @@ TEST_F(OptimusSource, ABatchAfterItsStreamWasDeletedBeginsItAgainAndTheReaderFol
   EXPECT_EQ(new_id->seq, 1u) << "numbered from the start";
 }
 
+// A streaming publisher keeps one batch in flight: each call returns once
+// the batch before it is appended, and flush appends the last.
+TEST_F(OptimusSource, StreamedBatchesAreAppendedInOrderEachBeforeTheCallAfterItReturns) {
+  optimus::Core core{options()};
+  auto pub = core.publisher<int>("imu", {.capacity = 1000});
+  auto reader = pub.source().subscribe({.capacity = 1000});
+  auto stream = pub.streaming();
+  std::vector<Sample<int>> batch(50, Sample<int>{0, Clock::now()});
+  std::vector<Sample<int>> got;
+  auto read = [&] {
+    for (auto& s : reader.read_all()) got.push_back(s);
+  };
+  for (int b = 0; b < 10; ++b) {
+    for (int i = 0; i < 50; ++i) batch[static_cast<std::size_t>(i)] = {b * 50 + i, Clock::time_point{std::chrono::milliseconds{b * 50 + i}}};
+    ASSERT_TRUE(stream.publish_all(batch));
+    read();
+    ASSERT_GE(got.size(), static_cast<std::size_t>(b * 50)) << "every batch before this one is appended";
+  }
+  ASSERT_TRUE(stream.flush());
+  read();
+  ASSERT_EQ(got.size(), 500u);
+  for (int i = 0; i < 500; ++i) {
+    ASSERT_EQ(got[static_cast<std::size_t>(i)].value, i);
+    ASSERT_EQ(got[static_cast<std::size_t>(i)].stamp, Clock::time_point{std::chrono::milliseconds{i}}) << "each keeps its stamp";
+  }
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
+// Both batches sent in the epoch of a stream deleted meanwhile are refused:
+// the call that reads the first refusal sends both again, in order, in a
+// new epoch.
+TEST_F(OptimusSource, StreamedBatchesRefusedAsTheirStreamWasDeletedGoAgainInOrder) {
+  optimus::Core core{options()};
+  auto pub = core.publisher<int>("imu", {.capacity = 1000});
+  auto reader = pub.source().subscribe({.capacity = 1000});
+  RawRedis raw{shared_redis().url()};
+  auto stream = pub.streaming();
+  std::vector<Sample<int>> all;
+  for (int i = 0; i < 90; ++i) all.push_back({i, Clock::now()});
+  const std::span values{all};
+  ASSERT_TRUE(stream.publish_all(values.first(30)));
+  ASSERT_TRUE(stream.flush());
+  ASSERT_EQ(reader.read_all().size(), 30u);
+  ASSERT_EQ(raw.integer({"DEL", pub.source().key()}), 1);
+  ASSERT_TRUE(stream.publish_all(values.subspan(30, 30)));  // in flight, to be refused
+  ASSERT_TRUE(stream.publish_all(values.last(30)));         // refused too, and both sent again
+  ASSERT_TRUE(stream.flush());
+  auto after = reader.read_all();
+  ASSERT_EQ(after.size(), 60u);
+  for (int i = 0; i < 60; ++i) ASSERT_EQ(after[static_cast<std::size_t>(i)].value, 30 + i);
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
+TEST_F(OptimusSource, AServerErrorOnAStreamedBatchIsTheNextCallsOrTheCoresWhenThePublisherGoes) {
+  optimus::Core core{options()};
+  auto errors = core.errors().subscribe();
+  auto pub = core.publisher<int>("imu", {.capacity = 100});
+  RawRedis raw{shared_redis().url()};
+  std::vector<Sample<int>> batch(10, Sample<int>{1, Clock::now()});
+  {
+    auto stream = pub.streaming();
+    ASSERT_TRUE(stream.publish_all(batch));
+    ASSERT_TRUE(stream.flush());
+    raw.command({"DEL", pub.source().key()});
+    raw.command({"SET", pub.source().key(), "not a stream"});
+    ASSERT_TRUE(stream.publish_all(batch)) << "sent; its replies not read yet";
+    auto next = stream.publish_all(batch);
+    ASSERT_FALSE(next);
+    EXPECT_EQ(next.error().code, Errc::type_mismatch);
+    EXPECT_NE(next.error().message.find("source 'imu'"), std::string::npos) << next.error().message;
+    EXPECT_NE(next.error().message.find("WRONGTYPE"), std::string::npos) << next.error().message;
+    EXPECT_TRUE(stream.flush()) << "nothing is in flight after an error";
+    ASSERT_TRUE(stream.publish_all(batch));
+  }  // its last batch's error goes to the core
+  auto reported = errors.read_for(2s);
+  ASSERT_TRUE(reported);
+  EXPECT_NE(reported->value.message.find("WRONGTYPE"), std::string::npos) << reported->value.message;
+}
+
+// The destructor waits for the batch in flight: a large one is appended
+// when it returns.
+TEST_F(OptimusSource, AStreamingPublisherAppendsItsLastBatchBeforeItGoes) {
+  optimus::Core core{options()};
+  auto pub = core.publisher<int>("imu", {.capacity = 20000});
+  auto reader = pub.source().subscribe({.capacity = 20000});
+  std::vector<Sample<int>> batch;
+  for (int i = 0; i < 20000; ++i) batch.push_back({i, Clock::now()});
+  {
+    auto stream = pub.streaming();
+    ASSERT_TRUE(stream.publish_all(batch));
+  }
+  EXPECT_EQ(reader.read_all().size(), 20000u);
+}
+
 // An entry not Prime's (appended with "*", so in a later epoch) does not
 // stop a writer: its batches go on after it, in its epoch.
 TEST_F(OptimusSource, BatchesGoOnAfterAnEntryNotPrimes) {

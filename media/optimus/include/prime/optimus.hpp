@@ -6,4 +6,5 @@
 #include "prime/optimus/core.hpp"
 #include "prime/optimus/options.hpp"
 #include "prime/optimus/source.hpp"
+#include "prime/optimus/streaming_publisher.hpp"
 #include "prime/topology.hpp"

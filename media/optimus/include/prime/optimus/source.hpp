@@ -13,6 +13,7 @@
 #include "prime/optimus/codec.hpp"
 #include "prime/optimus/detail/stream_reader.hpp"
 #include "prime/optimus/detail/stream_writer.hpp"
+#include "prime/optimus/streaming_publisher.hpp"
 #include "prime/topology/concepts.hpp"
 #include "prime/topology/graph.hpp"
 #include "prime/topology/qos.hpp"
@@ -60,7 +61,8 @@ class Source {
 static_assert(prime::Source<Source<int>>);
 
 // The writing end of a named source, for a process that produces values
-// without an Event: `publish` one, or `publish_all` a batch in one round trip.
+// without an Event: `publish` one, `publish_all` a batch in one round trip,
+// or stream batches with one in flight (`streaming`).
 //
 // Thread-safe.
 template <class T>
@@ -76,11 +78,15 @@ class Publisher {
   // Pipelined: the values go out in one write and are appended in order. A
   // batch never waits for readers (drop_oldest, whatever the source's policy).
   std::expected<void, Error> publish_all(std::span<const Sample<T>> samples) const {
-    std::vector<std::pair<std::string, Clock::time_point>> messages;
+    std::vector<detail::StreamState::Message> messages;
     messages.reserve(samples.size());
     for (const auto& s : samples) messages.emplace_back(encode_message(s.value), s.stamp);
     return state_->publish_all(messages);
   }
+
+  // A writer for a steady stream of batches, with one in flight while the
+  // next is sent (StreamingPublisher).
+  [[nodiscard]] StreamingPublisher<T> streaming() const { return StreamingPublisher<T>{state_}; }
 
   [[nodiscard]] const Source<T>& source() const noexcept { return source_; }
 

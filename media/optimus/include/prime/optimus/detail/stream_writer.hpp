@@ -7,7 +7,6 @@
 #include <initializer_list>
 #include <memory>
 #include <mutex>
-#include <numeric>
 #include <optional>
 #include <span>
 #include <string>
@@ -102,6 +101,9 @@ class StreamState {
     }
   }
 
+  // An encoded value and its stamp.
+  using Message = std::pair<std::string, Clock::time_point>;
+
   // Appends many encoded messages in one round trip (drop_oldest semantics:
   // a batch never waits for readers): one XADD each, in the stream's epoch,
   // numbered by the server, then one XTRIM, pipelined. No script: the
@@ -110,56 +112,88 @@ class StreamState {
   // deleted, or lost in a restart), or has a later epoch than this writer
   // knew (another writer began one, or an entry not Prime's came in); then
   // what it refused goes again, in order, in a new epoch or the later one.
-  std::expected<void, Error> publish_all(std::span<const std::pair<std::string, Clock::time_point>> messages) {
+  std::expected<void, Error> publish_all(std::span<const Message> messages) {
     auto lease = pool_->acquire();
     if (!lease) return std::unexpected(named(lease.error()));
     auto& c = **lease;
     c.set_timeout(command_timeout());
-    std::vector<std::string> stamps;
-    stamps.reserve(messages.size());
-    for (const auto& m : messages) stamps.push_back(std::to_string(stamp_ns(m.second)));
-    std::vector<std::size_t> pending(messages.size());
-    std::iota(pending.begin(), pending.end(), std::size_t{0});
-    for (int attempt = 0; !pending.empty(); ++attempt) {
-      if (attempt == kAppendAttempts)
-        return std::unexpected(Error{Errc::limit_exceeded, "source '" + name_ + "': the server refused " +
-                                                            std::to_string(pending.size()) + " appends " +
-                                                            std::to_string(attempt) + " times: its stream keeps changing"});
-      auto epoch = stream_epoch(c);
-      if (!epoch) return std::unexpected(std::move(epoch.error()));
-      const auto id = append_id(epoch->epoch);
-      // Sent kFlushEvery at a time: the server appends the first while the
-      // next are written out. (A failure to send shows in the replies.)
-      std::size_t queued = 0;
-      for (const auto i : pending) {
-        if (epoch->begins)
-          c.append({"XADD", key_, id, "t", stamps[i], "d", messages[i].first});
-        else
-          c.append({"XADD", key_, "NOMKSTREAM", id, "t", stamps[i], "d", messages[i].first});
-        if (++queued % kFlushEvery == 0) c.flush();
-      }
-      c.append({"XTRIM", key_, "MAXLEN", maxlen_});
-      std::vector<std::size_t> refused;
-      std::optional<Error> failed;
-      for (const auto i : pending) {
-        auto r = c.reply();
-        if (!r) return std::unexpected(named(r.error()));
-        if (is_nil(**r)) {
-          refused.push_back(i);
-          forget_epoch(epoch->epoch);  // the stream is gone
-        } else if (is_error(**r) && text(**r).find("equal or smaller") != std::string_view::npos) {
-          refused.push_back(i);
-          forget_epoch();  // the stream went on in a later epoch
-        } else if (is_error(**r) && !failed) {
-          failed = server_error(**r, "source '" + name_ + "': publishing");
-        }
-      }
-      auto trimmed = c.reply();
-      if (!trimmed) return std::unexpected(named(trimmed.error()));
-      if (failed) return std::unexpected(*failed);
-      pending = std::move(refused);
+    return append_all(c, messages);
+  }
+
+  // A batch of a StreamingPublisher sent and not yet answered: the
+  // connection it went on (kept from batch to batch), its messages (sent
+  // again if refused) and the epoch it appends in.
+  struct InFlight {
+    std::optional<Pool::Lease> lease;
+    std::vector<Message> batch;
+    std::uint64_t epoch = 0;
+  };
+
+  // Sends `batch` after the one in flight, then reads that one's replies: the
+  // server appends one batch while the caller encodes and sends the next.
+  // `batch` is then in flight, and what is returned is the outcome of the
+  // one before. If the server refused some of that one (a new epoch), this
+  // one is answered too, and what both refused goes again, in order, as in
+  // publish_all. After an error nothing is in flight.
+  std::expected<void, Error> stream(InFlight& f, std::vector<Message> batch) {
+    if (batch.empty()) return {};
+    if (!f.lease) {
+      auto lease = pool_->acquire();
+      if (!lease) return std::unexpected(named(lease.error()));
+      f.lease.emplace(std::move(*lease));
+      (**f.lease).set_timeout(command_timeout());
     }
-    return {};
+    auto& c = **f.lease;
+    std::optional<Epoch> epoch;
+    if (const auto known = known_epoch()) {
+      epoch = Epoch{*known, false};
+    } else {
+      // Learning it takes commands, whose replies would come after those
+      // of the batch in flight: that one is answered first.
+      if (auto before = settle(f); !before) return not_sent(f, before.error(), batch.size());
+      auto learned = stream_epoch(c);
+      if (!learned) return not_sent(f, learned.error(), batch.size());
+      epoch = *learned;
+    }
+    send(c, batch, *epoch);
+    if (f.batch.empty()) {
+      f.batch = std::move(batch);
+      f.epoch = epoch->epoch;
+      return {};
+    }
+    auto before = answers(c, f.batch.size(), f.epoch);
+    if (!before) return lost(f, before.error(), f.batch.size() + batch.size(), "the last two batches");
+    if (before->refused.empty() && !before->failed) {
+      f.batch = std::move(batch);
+      f.epoch = epoch->epoch;
+      return {};
+    }
+    auto now = answers(c, batch.size(), epoch->epoch);
+    if (!now) return lost(f, now.error(), f.batch.size() + batch.size(), "the last two batches");
+    if (before->failed || now->failed) {
+      f.batch.clear();
+      return std::unexpected(before->failed ? *before->failed : *now->failed);
+    }
+    std::vector<Message> again;
+    for (const auto i : before->refused) again.push_back(std::move(f.batch[i]));
+    for (const auto i : now->refused) again.push_back(std::move(batch[i]));
+    f.batch.clear();
+    return append_again(f, again);
+  }
+
+  // Reads the replies of the batch in flight (StreamingPublisher::flush),
+  // sending again what the server refused. Nothing is in flight after.
+  std::expected<void, Error> settle(InFlight& f) {
+    if (f.batch.empty()) return {};
+    auto& c = **f.lease;
+    auto got = answers(c, f.batch.size(), f.epoch);
+    if (!got) return lost(f, got.error(), f.batch.size(), "the last batch");
+    auto batch = std::move(f.batch);
+    f.batch.clear();
+    if (got->failed) return std::unexpected(*got->failed);
+    std::vector<Message> again;
+    for (const auto i : got->refused) again.push_back(std::move(batch[i]));
+    return append_again(f, again);
   }
 
   [[nodiscard]] std::chrono::microseconds command_timeout() const {
@@ -182,6 +216,107 @@ class StreamState {
   };
   static constexpr int kAppendAttempts = 4;
   static constexpr std::size_t kFlushEvery = 16;  // appends sent together in a batch
+
+  // What the server answered to a batch: the appends it refused (indices
+  // into the batch, in order), and the first other error it gave.
+  struct Answers {
+    std::vector<std::size_t> refused;
+    std::optional<Error> failed;
+  };
+
+  // Appends all of `messages` on `c`, sending what the server refuses again
+  // (at most kAppendAttempts times), in order, in the epoch it learns.
+  std::expected<void, Error> append_all(Connection& c, std::span<const Message> messages) {
+    std::vector<Message> again;
+    int attempts = 0;
+    for (auto pending = messages; !pending.empty(); pending = again) {
+      if (++attempts > kAppendAttempts)
+        return std::unexpected(Error{Errc::limit_exceeded, "source '" + name_ + "': the server refused " +
+                                                            std::to_string(pending.size()) + " appends " +
+                                                            std::to_string(kAppendAttempts) + " times: its stream keeps changing"});
+      auto epoch = stream_epoch(c);
+      if (!epoch) return std::unexpected(std::move(epoch.error()));
+      send(c, pending, *epoch);
+      auto got = answers(c, pending.size(), epoch->epoch);
+      if (!got) return std::unexpected(named(got.error()));
+      if (got->failed) return std::unexpected(*got->failed);
+      std::vector<Message> refused;
+      for (const auto i : got->refused) refused.push_back(pending[i]);
+      again = std::move(refused);
+    }
+    return {};
+  }
+
+  // Queues one append per message in `epoch` (which may create the stream if
+  // it begins it), then one XTRIM, and sends them: kFlushEvery at a time, so
+  // the server appends the first while the next are written out. (A failure
+  // to send shows in the replies.)
+  void send(Connection& c, std::span<const Message> messages, const Epoch& epoch) {
+    const auto id = append_id(epoch.epoch);
+    std::size_t queued = 0;
+    for (const auto& [message, stamp] : messages) {
+      const auto t = std::to_string(stamp_ns(stamp));
+      if (epoch.begins)
+        c.append({"XADD", key_, id, "t", t, "d", message});
+      else
+        c.append({"XADD", key_, "NOMKSTREAM", id, "t", t, "d", message});
+      if (++queued % kFlushEvery == 0) c.flush();
+    }
+    c.append({"XTRIM", key_, "MAXLEN", maxlen_});
+    c.flush();
+  }
+
+  // Reads the replies to a batch of `count` appends sent in `epoch`, and its
+  // XTRIM's. A refusal makes the next batch learn the epoch again.
+  std::expected<Answers, Error> answers(Connection& c, std::size_t count, std::uint64_t epoch) {
+    Answers got;
+    for (std::size_t i = 0; i < count; ++i) {
+      auto r = c.reply();
+      if (!r) return std::unexpected(std::move(r.error()));
+      if (is_nil(**r)) {
+        got.refused.push_back(i);
+        forget_epoch(epoch);  // the stream is gone
+      } else if (is_error(**r) && text(**r).find("equal or smaller") != std::string_view::npos) {
+        got.refused.push_back(i);
+        forget_epoch();  // the stream went on in a later epoch
+      } else if (is_error(**r) && !got.failed) {
+        got.failed = server_error(**r, "source '" + name_ + "': publishing");
+      }
+    }
+    auto trimmed = c.reply();
+    if (!trimmed) return std::unexpected(std::move(trimmed.error()));
+    return got;
+  }
+
+  // A StreamingPublisher's appends refused from the batches in flight, sent
+  // again: then nothing is in flight. A connection that failed meanwhile is
+  // not kept.
+  std::expected<void, Error> append_again(InFlight& f, std::span<const Message> refused) {
+    auto done = append_all(**f.lease, refused);
+    if (!done && (**f.lease).broken()) f.lease.reset();
+    return done;
+  }
+
+  // The connection of a StreamingPublisher failed with its batches unanswered:
+  // nothing is in flight after, and the next batch takes another connection.
+  std::unexpected<Error> lost(InFlight& f, const Error& e, std::size_t values, std::string_view which) {
+    f.batch.clear();
+    f.lease.reset();
+    return std::unexpected(Error{e.code, "source '" + name_ + "': " + e.message + "; the " + std::to_string(values) +
+                                             " values of " + std::string{which} + " may not all have been appended"});
+  }
+  // ...or failed before a batch of `values` was sent.
+  std::unexpected<Error> not_sent(InFlight& f, const Error& e, std::size_t values) {
+    f.batch.clear();
+    f.lease.reset();
+    return std::unexpected(Error{e.code, e.message + "; a batch of " + std::to_string(values) + " values was not sent"});
+  }
+
+  // The epoch the stream is in, as this writer last saw it.
+  std::optional<std::uint64_t> known_epoch() {
+    std::scoped_lock lock{mutex_};
+    return epoch_;
+  }
 
   // The stream's epoch as this writer last saw it; else its last entry's;
   // else (no stream, or it is gone) a new one, at the server's time.
