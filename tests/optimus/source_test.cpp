@@ -202,6 +202,37 @@ TEST_F(OptimusSource, StreamedBatchesRefusedAsTheirStreamWasDeletedGoAgainInOrde
   EXPECT_EQ(reader.lost(), 0u);
 }
 
+// Another handle of the source saw the stream go on in a later epoch while
+// a streamed batch was in flight in the earlier one: that batch, refused,
+// goes again before the next is sent, so the streamed values stay in order.
+TEST_F(OptimusSource, AStreamedBatchRefusedAfterAnotherHandleMovedOnStaysBeforeTheNext) {
+  optimus::Core core{options()};
+  auto errors = core.errors().subscribe();
+  auto pub = core.publisher<int>("imu", {.capacity = 1000});
+  auto reader = pub.source().subscribe({.capacity = 1000});
+  RawRedis raw{shared_redis().url()};
+  auto stream = pub.streaming();
+  std::vector<Sample<int>> streamed, other;
+  for (int i = 0; i < 30; ++i) streamed.push_back({i, Clock::now()});
+  for (int i = 100; i < 105; ++i) other.push_back({i, Clock::now()});
+  const std::span values{streamed};
+  ASSERT_TRUE(stream.publish_all(values.first(10)));
+  ASSERT_TRUE(stream.flush());
+  // The stream goes on in a later epoch (an id far ahead: "*" may still
+  // number in the stream's first millisecond).
+  raw.command({"XADD", pub.source().key(), "99999999999999-0", "hello", "world"});
+  ASSERT_TRUE(stream.publish_all(values.subspan(10, 10)));  // in flight in the earlier one: to be refused
+  ASSERT_TRUE(pub.publish_all(other));                       // refused, and appended in the later one
+  ASSERT_TRUE(stream.publish_all(values.last(10)));
+  ASSERT_TRUE(stream.flush());
+  std::vector<int> mine, theirs;
+  for (const auto& s : reader.read_all()) (s.value < 100 ? mine : theirs).push_back(s.value);
+  ASSERT_EQ(mine.size(), 30u);
+  for (int i = 0; i < 30; ++i) EXPECT_EQ(mine[static_cast<std::size_t>(i)], i) << "the streamed values in their order";
+  EXPECT_EQ(theirs, (std::vector<int>{100, 101, 102, 103, 104}));
+  EXPECT_TRUE(errors.read_for(2s)) << "the entry not Prime's is reported";
+}
+
 TEST_F(OptimusSource, AServerErrorOnAStreamedBatchIsTheNextCallsOrTheCoresWhenThePublisherGoes) {
   optimus::Core core{options()};
   auto errors = core.errors().subscribe();

@@ -145,11 +145,14 @@ class StreamState {
     }
     auto& c = **f.lease;
     std::optional<Epoch> epoch;
-    if (const auto known = known_epoch()) {
+    if (const auto known = known_epoch(); known && (f.batch.empty() || *known == f.epoch)) {
       epoch = Epoch{*known, false};
     } else {
-      // Learning it takes commands, whose replies would come after those
-      // of the batch in flight: that one is answered first.
+      // Learning the epoch takes commands, whose replies would come after
+      // those of the batch in flight: that one is answered first. So it is
+      // when another handle saw the stream go on in a later epoch: were this
+      // batch appended there, what the server refused of the one in flight
+      // would go again after it.
       if (auto before = settle(f); !before) return not_sent(f, before.error(), batch.size());
       auto learned = stream_epoch(c);
       if (!learned) return not_sent(f, learned.error(), batch.size());
