@@ -29,6 +29,7 @@
 #include <cstdio>
 #include <expected>
 #include <memory>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
@@ -178,19 +179,25 @@ void BM_Optimus_Publish(benchmark::State& state) {
 }
 BENCHMARK(BM_Optimus_Publish)->UseRealTime();
 
-void BM_Optimus_PublishPipelined(benchmark::State& state) {
-  prime::optimus::Core core{options("pipelined")};
-  auto pub = core.publisher<Imu>("imu", {.capacity = 4096});
+// Batches of state.range(0) values, each handed to `publish_all`.
+template <class PublishAll>
+void publish_batches(benchmark::State& state, PublishAll&& publish_all) {
   const auto batch_size = static_cast<std::size_t>(state.range(0));
   std::vector<prime::Sample<Imu>> batch(batch_size, prime::Sample<Imu>{Imu{}, prime::Clock::now()});
   for (auto _ : state) {
     for (auto& s : batch) ++s.value.sequence;
-    if (!pub.publish_all(batch)) {
+    if (!publish_all(std::span<const prime::Sample<Imu>>{batch})) {
       state.SkipWithError("publish_all failed");
       break;
     }
   }
   state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(batch_size));
+}
+
+void BM_Optimus_PublishPipelined(benchmark::State& state) {
+  prime::optimus::Core core{options("pipelined")};
+  auto pub = core.publisher<Imu>("imu", {.capacity = 4096});
+  publish_batches(state, [&](auto batch) { return pub.publish_all(batch).has_value(); });
 }
 BENCHMARK(BM_Optimus_PublishPipelined)->Arg(64)->UseRealTime();
 
@@ -198,17 +205,8 @@ void BM_Optimus_PublishStreamed(benchmark::State& state) {
   prime::optimus::Core core{options("streamed")};
   auto pub = core.publisher<Imu>("imu", {.capacity = 4096});
   auto stream = pub.streaming();
-  const auto batch_size = static_cast<std::size_t>(state.range(0));
-  std::vector<prime::Sample<Imu>> batch(batch_size, prime::Sample<Imu>{Imu{}, prime::Clock::now()});
-  for (auto _ : state) {
-    for (auto& s : batch) ++s.value.sequence;
-    if (!stream.publish_all(batch)) {
-      state.SkipWithError("publish_all failed");
-      break;
-    }
-  }
+  publish_batches(state, [&](auto batch) { return stream.publish_all(batch).has_value(); });
   if (!stream.flush()) state.SkipWithError("the last batch failed");
-  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(batch_size));
 }
 BENCHMARK(BM_Optimus_PublishStreamed)->Arg(64)->UseRealTime();
 

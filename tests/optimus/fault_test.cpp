@@ -18,6 +18,19 @@ namespace {
 
 using OptimusFault = OptimusTest;
 
+// What `reader` reads until it has `n` values, or 10 s have passed.
+template <class Reader>
+std::vector<int> read_at_least(Reader& reader, std::size_t n) {
+  std::vector<int> got;
+  (void)eventually(
+      [&] {
+        for (auto& s : reader.read_all()) got.push_back(s.value);
+        return got.size() >= n;
+      },
+      10s);
+  return got;
+}
+
 TEST_F(OptimusFault, CallersGetErrorsWhileRedisIsDownAndWorkResumesAfter) {
   RedisServer redis;  // this test's own: it is killed and restarted
   const optimus::Options opts{.url = redis.url(), .domain = domain, .call_timeout = 300ms};
@@ -109,13 +122,7 @@ TEST_F(OptimusFault, BatchesBeginTheStreamAgainAfterARestartAndTheReaderFollows)
   redis.kill();
   redis.start();
   ASSERT_TRUE(eventually([&] { return pub.publish_all(std::span{batch}.last(100)).has_value(); }, 10s));
-  std::vector<int> got;
-  ASSERT_TRUE(eventually(
-      [&] {
-        for (auto& s : reader.read_all()) got.push_back(s.value);
-        return got.size() >= 100;
-      },
-      10s));
+  const auto got = read_at_least(reader, 100);
   ASSERT_EQ(got.size(), 100u);
   for (int i = 0; i < 100; ++i) EXPECT_EQ(got[static_cast<std::size_t>(i)], 100 + i);
   EXPECT_EQ(reader.lost(), 0u);
@@ -148,13 +155,7 @@ TEST_F(OptimusFault, AStreamingPublisherWhoseServerDiedSaysSoAndStreamsAgainAfte
 
   redis.start();
   ASSERT_TRUE(eventually([&] { return stream.publish_all(values.last(100)).has_value() && stream.flush().has_value(); }, 10s));
-  std::vector<int> got;
-  ASSERT_TRUE(eventually(
-      [&] {
-        for (auto& s : reader.read_all()) got.push_back(s.value);
-        return got.size() >= 100;
-      },
-      10s));
+  const auto got = read_at_least(reader, 100);
   ASSERT_GE(got.size(), 100u);
   for (std::size_t i = 0; i < 100; ++i) EXPECT_EQ(got[got.size() - 100 + i], 200 + static_cast<int>(i)) << "in order";
 }
