@@ -7,6 +7,7 @@
 #include <string>
 #include <thread>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include "optimus/support/optimus_fixture.hpp"
@@ -274,26 +275,31 @@ TEST_F(OptimusSource, AStreamingPublisherAppendsItsLastBatchBeforeItGoes) {
   EXPECT_EQ(reader.read_all().size(), 20000u);
 }
 
-// An entry not Prime's (appended with "*", so in a later epoch) does not
-// stop a writer: its batches go on after it, in its epoch.
+// An entry not Prime's does not stop a writer: its batches go on after it,
+// in its epoch. Appended with "*" it is in a later epoch, or, in the
+// stream's first millisecond, in the stream's own; an id far ahead makes
+// sure of a later one.
 TEST_F(OptimusSource, BatchesGoOnAfterAnEntryNotPrimes) {
-  optimus::Core core{options()};
-  auto errors = core.errors().subscribe();
-  auto pub = core.publisher<int>("imu", {.capacity = 100});
-  auto reader = pub.source().subscribe({.capacity = 100});
-  RawRedis raw{shared_redis().url()};
-  std::vector<Sample<int>> batch;
-  for (int i = 0; i < 20; ++i) batch.push_back({i, Clock::now()});
-  ASSERT_TRUE(pub.publish_all(std::span{batch}.first(10)));
-  raw.command({"XADD", pub.source().key(), "*", "hello", "world"});
-  ASSERT_TRUE(pub.publish_all(std::span{batch}.last(10)));
-  auto all = reader.read_all();
-  ASSERT_EQ(all.size(), 20u);
-  for (int i = 0; i < 20; ++i) ASSERT_EQ(all[static_cast<std::size_t>(i)].value, i);
-  EXPECT_EQ(reader.lost(), 1u) << "the entry skipped, and only it";
-  auto error = errors.read_for(2s);
-  ASSERT_TRUE(error);
-  EXPECT_NE(error->value.message.find("not a Prime entry"), std::string::npos) << error->value.message;
+  for (const auto& [name, id] : {std::pair{"imu", "*"}, std::pair{"imu-ahead", "99999999999999-0"}}) {
+    SCOPED_TRACE(std::string{"the entry's id: "} + id);
+    optimus::Core core{options()};
+    auto errors = core.errors().subscribe();
+    auto pub = core.publisher<int>(name, {.capacity = 100});
+    auto reader = pub.source().subscribe({.capacity = 100});
+    RawRedis raw{shared_redis().url()};
+    std::vector<Sample<int>> batch;
+    for (int i = 0; i < 20; ++i) batch.push_back({i, Clock::now()});
+    ASSERT_TRUE(pub.publish_all(std::span{batch}.first(10)));
+    raw.command({"XADD", pub.source().key(), id, "hello", "world"});
+    ASSERT_TRUE(pub.publish_all(std::span{batch}.last(10)));
+    auto all = reader.read_all();
+    ASSERT_EQ(all.size(), 20u);
+    for (int i = 0; i < 20; ++i) ASSERT_EQ(all[static_cast<std::size_t>(i)].value, i);
+    EXPECT_EQ(reader.lost(), 1u) << "the entry skipped, and only it";
+    auto error = errors.read_for(2s);
+    ASSERT_TRUE(error);
+    EXPECT_NE(error->value.message.find("not a Prime entry"), std::string::npos) << error->value.message;
+  }
 }
 
 TEST_F(OptimusSource, AForeignEntryInTheStreamIsReportedAndSkipped) {
