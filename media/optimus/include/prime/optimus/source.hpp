@@ -78,10 +78,7 @@ class Publisher {
   // Pipelined: the values go out in one write and are appended in order. A
   // batch never waits for readers (drop_oldest, whatever the source's policy).
   std::expected<void, Error> publish_all(std::span<const Sample<T>> samples) const {
-    std::vector<detail::StreamState::Message> messages;
-    messages.reserve(samples.size());
-    for (const auto& s : samples) messages.emplace_back(encode_message(s.value), s.stamp);
-    return state_->publish_all(messages);
+    return state_->publish_all(detail::encoded(samples));
   }
 
   // A writer for a steady stream of batches, with one in flight while the

@@ -13,6 +13,17 @@
 
 namespace prime::optimus {
 
+namespace detail {
+// A batch's values encoded, each with its stamp, as a stream's writer sends them.
+template <class T>
+std::vector<StreamState::Message> encoded(std::span<const Sample<T>> samples) {
+  std::vector<StreamState::Message> batch;
+  batch.reserve(samples.size());
+  for (const auto& s : samples) batch.emplace_back(encode_message(s.value), s.stamp);
+  return batch;
+}
+}  // namespace detail
+
 // The writing end of a source for a steady stream of batches (a high-rate
 // sensor, a log replayed): one batch is in flight while the next is encoded
 // and sent, so the server appends without waiting out the writer's round
@@ -43,10 +54,7 @@ class StreamingPublisher {
   }
 
   std::expected<void, Error> publish_all(std::span<const Sample<T>> samples) {
-    std::vector<detail::StreamState::Message> batch;
-    batch.reserve(samples.size());
-    for (const auto& s : samples) batch.emplace_back(encode_message(s.value), s.stamp);
-    return state_->stream(in_flight_, std::move(batch));
+    return state_->stream(in_flight_, detail::encoded(samples));
   }
 
   std::expected<void, Error> flush() { return state_->settle(in_flight_); }

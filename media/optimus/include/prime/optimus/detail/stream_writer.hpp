@@ -159,29 +159,26 @@ class StreamState {
       epoch = *learned;
     }
     send(c, batch, *epoch);
-    if (f.batch.empty()) {
-      f.batch = std::move(batch);
-      f.epoch = epoch->epoch;
-      return {};
+    if (!f.batch.empty()) {
+      auto before = answers(c, f.batch.size(), f.epoch);
+      if (!before) return lost(f, before.error(), f.batch.size() + batch.size(), "the last two batches");
+      if (!before->refused.empty() || before->failed) {
+        auto now = answers(c, batch.size(), epoch->epoch);
+        if (!now) return lost(f, now.error(), f.batch.size() + batch.size(), "the last two batches");
+        if (before->failed || now->failed) {
+          f.batch.clear();
+          return std::unexpected(before->failed ? *before->failed : *now->failed);
+        }
+        std::vector<Message> again;
+        for (const auto i : before->refused) again.push_back(std::move(f.batch[i]));
+        for (const auto i : now->refused) again.push_back(std::move(batch[i]));
+        f.batch.clear();
+        return append_again(f, again);
+      }
     }
-    auto before = answers(c, f.batch.size(), f.epoch);
-    if (!before) return lost(f, before.error(), f.batch.size() + batch.size(), "the last two batches");
-    if (before->refused.empty() && !before->failed) {
-      f.batch = std::move(batch);
-      f.epoch = epoch->epoch;
-      return {};
-    }
-    auto now = answers(c, batch.size(), epoch->epoch);
-    if (!now) return lost(f, now.error(), f.batch.size() + batch.size(), "the last two batches");
-    if (before->failed || now->failed) {
-      f.batch.clear();
-      return std::unexpected(before->failed ? *before->failed : *now->failed);
-    }
-    std::vector<Message> again;
-    for (const auto i : before->refused) again.push_back(std::move(f.batch[i]));
-    for (const auto i : now->refused) again.push_back(std::move(batch[i]));
-    f.batch.clear();
-    return append_again(f, again);
+    f.batch = std::move(batch);
+    f.epoch = epoch->epoch;
+    return {};
   }
 
   // Reads the replies of the batch in flight (StreamingPublisher::flush),
