@@ -183,6 +183,7 @@ class Cursor {
     b.chunks.reserve(max);  // the steps that may throw: before anything is taken
     b.info.reserve(max);
     free_.pop_back();  // before anything retires more
+    const auto places = topic_->places();
     while (true) {
       // A batch the cursor may keep reads its samples' sizes and stamps
       // beside the ring, before the look at `lagging` that decides whether
@@ -190,7 +191,7 @@ class Cursor {
       // chunk once it is held.
       const bool may_keep = may_cover(next_);
       for (auto seq = next_; seq - next_ < max; ++seq) {
-        const auto entry = topic_->ring(seq).load(std::memory_order_acquire);
+        const auto entry = places.ring(seq).load(std::memory_order_acquire);
         const auto ahead = RingEntry::ahead(entry, seq);
         if (ahead != 0) {
           if (seq == next_ && ahead < 0) {  // nothing new
@@ -202,13 +203,13 @@ class Cursor {
           break;
         }
         const auto chunk = RingEntry::chunk(entry);
-        __builtin_prefetch(topic_->payload(chunk));
+        __builtin_prefetch(places.payload(chunk));
         b.chunks.push_back(chunk);
         if (may_keep) {
-          const auto& info = topic_->info(seq);
+          const auto& info = places.info(seq);
           b.info.push_back({info.size.load(std::memory_order_acquire), info.stamp.load(std::memory_order_acquire)});
         } else {
-          prefetch_for_write(&topic_->chunk(chunk));  // for the hold
+          prefetch_for_write(&places.chunk(chunk));  // for the hold
         }
       }
       if (b.chunks.empty()) {
@@ -220,7 +221,7 @@ class Cursor {
       if (!b.held) break;
       b.info.clear();
       for (std::size_t i = 0; i < b.chunks.size(); ++i) {
-        auto& chunk = topic_->chunk(b.chunks[i]);
+        auto& chunk = places.chunk(b.chunks[i]);
         chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
         if (chunk.seq.load(std::memory_order_seq_cst) != next_ + i) {
           chunk.holders.fetch_and(~bit_);

@@ -18,6 +18,33 @@
 
 namespace prime::shm::detail {
 
+// Where a topic's ring, infos and chunks lie in this process: addresses and
+// sizes read once from its header, when it was checked, so no later write
+// there sends an access out of the segment. A hot loop takes a copy, which
+// stays in registers: read through the topic, every atomic stored in the
+// loop would have the compiler load them from memory again.
+struct Places {
+  std::atomic<std::uint64_t>* rings;
+  SampleInfo* infos;
+  std::byte* chunks;
+  std::uint64_t capacity;
+  std::uint64_t mask;    // capacity - 1 where that is a power of two, else 0
+  std::uint64_t stride;  // from one chunk to the next
+
+  // Where `seq` lands in the ring: a mask where the capacity is a power of
+  // two (a division costs more than the rest of a poll), else the remainder.
+  [[nodiscard]] std::uint64_t ring_index(std::uint64_t seq) const noexcept {
+    return mask != 0 ? seq & mask : seq % capacity;
+  }
+  [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept { return rings[ring_index(seq)]; }
+  // The size and stamp beside ring(seq) (SampleInfo).
+  [[nodiscard]] SampleInfo& info(std::uint64_t seq) const noexcept { return infos[ring_index(seq)]; }
+  [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept {
+    return *std::launder(reinterpret_cast<ChunkHeader*>(chunks + i * stride));
+  }
+  [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept { return chunks + i * stride + sizeof(ChunkHeader); }
+};
+
 // A topic's segment mapped into this process, shared by its publisher and
 // subscriptions here. Thread-safe (all shared state is atomic or fixed at
 // creation).
@@ -60,20 +87,12 @@ class Topic {
   [[nodiscard]] const Segment& segment() const noexcept { return segment_; }
   [[nodiscard]] Registry& registry() const noexcept { return *registry_; }
   [[nodiscard]] TopicHeader& header() const noexcept { return *header_; }
-  [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept { return ring_[ring_index(seq)]; }
-  // Where `seq` lands in the ring: a mask where the capacity is a power of
-  // two (a division costs more than the rest of a poll), else the remainder.
-  [[nodiscard]] std::uint64_t ring_index(std::uint64_t seq) const noexcept {
-    return ring_mask_ != 0 ? seq & ring_mask_ : seq % capacity_;
-  }
-  // The size and stamp beside ring(seq) (SampleInfo).
-  [[nodiscard]] SampleInfo& info(std::uint64_t seq) const noexcept { return info_[ring_index(seq)]; }
-  [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept {
-    return *std::launder(reinterpret_cast<ChunkHeader*>(chunks_ + i * header_->chunk_stride));
-  }
-  [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept {
-    return chunks_ + i * header_->chunk_stride + sizeof(ChunkHeader);
-  }
+  [[nodiscard]] const Places& places() const noexcept { return places_; }
+  [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept { return places_.ring(seq); }
+  [[nodiscard]] std::uint64_t ring_index(std::uint64_t seq) const noexcept { return places_.ring_index(seq); }
+  [[nodiscard]] SampleInfo& info(std::uint64_t seq) const noexcept { return places_.info(seq); }
+  [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept { return places_.chunk(i); }
+  [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept { return places_.payload(i); }
   [[nodiscard]] TopicQos qos() const noexcept {
     const auto& h = *header_;
     return {.capacity = h.capacity,
@@ -134,11 +153,12 @@ class Topic {
         name_{std::move(name)},
         segment_{std::move(segment)},
         header_{std::launder(reinterpret_cast<TopicHeader*>(segment_.data()))},
-        ring_{reinterpret_cast<std::atomic<std::uint64_t>*>(segment_.data() + header_->ring_offset)},
-        info_{std::launder(reinterpret_cast<SampleInfo*>(segment_.data() + header_->info_offset))},
-        chunks_{segment_.data() + header_->chunks_offset},
-        capacity_{header_->capacity},
-        ring_mask_{std::has_single_bit(capacity_) ? capacity_ - 1 : 0} {}
+        places_{.rings = reinterpret_cast<std::atomic<std::uint64_t>*>(segment_.data() + header_->ring_offset),
+                .infos = std::launder(reinterpret_cast<SampleInfo*>(segment_.data() + header_->info_offset)),
+                .chunks = segment_.data() + header_->chunks_offset,
+                .capacity = header_->capacity,
+                .mask = std::has_single_bit(header_->capacity) ? header_->capacity - 1 : 0,
+                .stride = header_->chunk_stride} {}
 
   static bool is_set_up(const std::string& name, std::byte* data, std::size_t size) {
     if (size < sizeof(TopicHeader)) return false;
@@ -191,11 +211,7 @@ class Topic {
   std::string name_;
   Segment segment_;
   TopicHeader* header_;
-  std::atomic<std::uint64_t>* ring_;
-  SampleInfo* info_;
-  std::byte* chunks_;
-  std::uint64_t capacity_;   // the header's, read once
-  std::uint64_t ring_mask_;  // capacity_ - 1 where that is a power of two, else 0
+  Places places_;
 };
 
 }  // namespace prime::shm::detail

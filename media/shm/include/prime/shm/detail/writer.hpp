@@ -56,7 +56,7 @@ class Writer {
     h.light_publisher.store(light_ ? 1 : 0, std::memory_order_seq_cst);
     next_ = h.head.load();
     in_ring_.resize(h.capacity);
-    batch_leaving_.reserve(h.capacity + kLeavingMax);
+    batch_leaving_.resize(h.capacity + kLeavingMax);
     for (std::uint64_t i = 0; i < h.capacity; ++i) in_ring_[i] = RingEntry::chunk(topic_->ring(i).load());
   }
   Writer(const Writer&) = delete;
@@ -132,17 +132,22 @@ class Writer {
       min_cursor_ = std::min(slowest(), next_);  // a fresh look may find more room
       more = std::min<std::uint64_t>(max - 1, room());
     }
-    for (std::uint64_t k = 0; k < more; ++k) {
+    const auto from = out.size();
+    out.resize(from + more);
+    std::uint64_t got = 0;
+    for (; got < more; ++got) {
       const auto chunk = claim();
       if (!chunk) break;
-      out.push_back(*chunk);
-      ++out_;
+      out[from + got] = *chunk;
     }
+    out.resize(from + got);
+    out_ += got;
     // The lines of their infos (published in order, the batch lands after
     // the loans out before it), on their way while the samples are written.
+    const auto places = topic_->places();
     const auto at = next_ + out_ - out.size();
-    for (std::uint64_t k = 0; k < out.size(); k += kInfosPerLine) prefetch_for_write(&topic_->info(at + k));
-    prefetch_for_write(&topic_->info(at + out.size() - 1));
+    for (std::uint64_t k = 0; k < out.size(); k += kInfosPerLine) prefetch_for_write(&places.info(at + k));
+    prefetch_for_write(&places.info(at + out.size() - 1));
     return {};
   }
 
@@ -159,33 +164,35 @@ class Writer {
   // not once for each), the chunks they push out, then the head and one wake.
   template <class StampOf>
   void publish_some(std::span<const std::uint32_t> chunks, std::size_t size, StampOf&& stamp_of) noexcept {
+    const auto places = topic_->places();
     const auto first = next_;
     out_ -= chunks.size();
     for (std::size_t i = 0; i < chunks.size(); ++i) {
-      auto& c = topic_->chunk(chunks[i]);
-      describe(c, first + i, size, stamp_of(i));
+      auto& c = places.chunk(chunks[i]);
+      describe(c, places.info(first + i), size, stamp_of(i));
       c.seq.store(first + i, std::memory_order_release);
       to_ring(c);
     }
     for (std::size_t i = 0; i < chunks.size(); ++i)
-      topic_->ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
+      places.ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     // The chunks these entries push out of the ring, and those still leaving
     // from before: their samples cleared before the head, evicted after it.
-    while (const auto old = leaving_.pop()) batch_leaving_.push_back(*old);
+    std::size_t leaving = 0;
+    while (const auto old = leaving_.pop()) batch_leaving_[leaving++] = *old;
     for (std::size_t i = 0; i < chunks.size(); ++i)
-      if (const auto old = std::exchange(in_ring_[topic_->ring_index(first + i)], chunks[i]); old != kNoChunk) {
-        batch_leaving_.push_back(old);
-        prefetch_for_write(&topic_->chunk(old));
+      if (const auto old = std::exchange(in_ring_[places.ring_index(first + i)], chunks[i]); old != kNoChunk) {
+        batch_leaving_[leaving++] = old;
+        prefetch_for_write(&places.chunk(old));
       }
-    for (const auto old : batch_leaving_) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
+    for (std::size_t k = 0; k < leaving; ++k)
+      places.chunk(batch_leaving_[k]).seq.store(kNotPublished, std::memory_order_relaxed);
     next_ = first + chunks.size();
     const bool full = fences_fully();
     store_head(next_, full);
     // One fence for the batch's evictions (evict), not a read-modify-write
     // per sample.
     fence_after_head(full);
-    for (const auto old : batch_leaving_) evict(old, true);
-    batch_leaving_.clear();
+    for (std::size_t k = 0; k < leaving; ++k) evict(batch_leaving_[k], true);
     wake_subscribers();
     claim_ahead();
   }
@@ -201,16 +208,17 @@ class Writer {
   // sequence cleared before the store, whose fence serves the eviction);
   // after a light one, with others later (leave).
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
-    auto& c = topic_->chunk(chunk);
+    const auto places = topic_->places();
+    auto& c = places.chunk(chunk);
     const auto seq = next_++;
     --out_;
-    describe(c, seq, size, stamp);
+    describe(c, places.info(seq), size, stamp);
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
-    topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
-    const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk);
+    places.ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
+    const auto old = std::exchange(in_ring_[places.ring_index(seq)], chunk);
     const bool full = fences_fully();
-    if (full && old != kNoChunk) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
+    if (full && old != kNoChunk) places.chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
     store_head(seq + 1, full);
     if (old != kNoChunk) {
       if (full) {
@@ -228,11 +236,10 @@ class Writer {
   // Sample `seq`'s size and stamp: in its chunk, for readers that hold it,
   // and beside its ring entry, for batch readers their cursor keeps
   // (SampleInfo). Both before the ring entry.
-  void describe(ChunkHeader& c, std::uint64_t seq, std::size_t size, Clock::time_point stamp) const noexcept {
+  static void describe(ChunkHeader& c, SampleInfo& info, std::size_t size, Clock::time_point stamp) noexcept {
     const auto ticks = stamp.time_since_epoch().count();
     c.size = size;
     c.stamp = ticks;
-    auto& info = topic_->info(seq);
     info.size.store(size, std::memory_order_release);
     info.stamp.store(ticks, std::memory_order_release);
   }
@@ -551,8 +558,8 @@ class Writer {
   // loans one at a time after a batch does not sit on many.
   Fifo<64> spare_;
   Fifo<kLeavingMax> leaving_;  // out of the ring, not evicted yet (see leave)
-  // A batch's (publish_some), and those leaving from before: reserved for
-  // a batch as large as the ring and kLeavingMax more.
+  // A batch's (publish_some), and those leaving from before: room for a
+  // batch as large as the ring and kLeavingMax more.
   std::vector<std::uint32_t> batch_leaving_;
   std::vector<std::uint32_t> in_ring_;  // the chunk each ring entry names, as this publisher wrote it
   std::uint64_t min_cursor_ = 0;    // the slowest subscriber's cursor when last looked at
