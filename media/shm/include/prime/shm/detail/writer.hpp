@@ -144,10 +144,9 @@ class Writer {
     out_ += got;
     // The lines of their infos (published in order, the batch lands after
     // the loans out before it), on their way while the samples are written.
-    const auto places = topic_->places();
     const auto at = next_ + out_ - out.size();
-    for (std::uint64_t k = 0; k < out.size(); k += kInfosPerLine) prefetch_for_write(&places.info(at + k));
-    prefetch_for_write(&places.info(at + out.size() - 1));
+    for (std::uint64_t k = 0; k < out.size(); k += kInfosPerLine) prefetch_for_write(&topic_->info(at + k));
+    prefetch_for_write(&topic_->info(at + out.size() - 1));
     return {};
   }
 
