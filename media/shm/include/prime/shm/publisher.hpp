@@ -109,11 +109,15 @@ template <Message T>
 class Batch {
  public:
   Batch(Batch&& other) noexcept
-      : owner_{std::exchange(other.owner_, nullptr)}, chunks_{std::move(other.chunks_)}, size_{other.size_} {}
+      : owner_{std::exchange(other.owner_, nullptr)},
+        places_{other.places_},
+        chunks_{std::move(other.chunks_)},
+        size_{other.size_} {}
   Batch& operator=(Batch&& other) noexcept {
     if (this != &other) {
       discard();
       owner_ = std::exchange(other.owner_, nullptr);
+      places_ = other.places_;
       chunks_ = std::move(other.chunks_);
       size_ = other.size_;
     }
@@ -124,11 +128,11 @@ class Batch {
   // How many slots were loaned: at least one, at most what was asked.
   [[nodiscard]] std::size_t size() const noexcept { return chunks_.size(); }
   [[nodiscard]] T& operator[](std::size_t i) const noexcept requires(!std::is_same_v<T, Bytes>) {
-    return *std::launder(reinterpret_cast<T*>(owner_->writer.topic()->payload(chunks_[i])));
+    return *std::launder(reinterpret_cast<T*>(places_.payload(chunks_[i])));
   }
   // Slot `i`'s bytes, on a raw byte topic.
   [[nodiscard]] std::span<std::byte> bytes(std::size_t i) const noexcept requires std::is_same_v<T, Bytes> {
-    return {owner_->writer.topic()->payload(chunks_[i]), size_};
+    return {places_.payload(chunks_[i]), size_};
   }
 
   // Publishes every slot, stamped `stamp`.
@@ -150,7 +154,7 @@ class Batch {
   template <Message>
   friend class Publisher;
   Batch(detail::LoaningWriter* owner, std::vector<std::uint32_t> chunks, std::size_t size)
-      : owner_{owner}, chunks_{std::move(chunks)}, size_{size} {
+      : owner_{owner}, places_{owner->writer.topic()->places()}, chunks_{std::move(chunks)}, size_{size} {
     ++owner_->loans;
   }
 
@@ -165,6 +169,7 @@ class Batch {
   }
 
   detail::LoaningWriter* owner_;
+  detail::Places places_;  // the topic's, copied: slot i is found without a walk through the owner
   std::vector<std::uint32_t> chunks_;
   std::size_t size_;  // bytes in each slot
 };

@@ -31,6 +31,7 @@ class Views {
   Views() = default;  // empty
   Views(Views&& other) noexcept
       : owner_{std::exchange(other.owner_, nullptr)},
+        places_{other.places_},
         index_{other.index_},
         chunks_{std::exchange(other.chunks_, {})},
         info_{std::exchange(other.info_, {})},
@@ -39,6 +40,7 @@ class Views {
     if (this != &other) {
       end();
       owner_ = std::exchange(other.owner_, nullptr);
+      places_ = other.places_;
       index_ = other.index_;
       chunks_ = std::exchange(other.chunks_, {});
       info_ = std::exchange(other.info_, {});
@@ -52,11 +54,11 @@ class Views {
   [[nodiscard]] bool empty() const noexcept { return chunks_.empty(); }
   // Sample `i`, where its publisher wrote it.
   [[nodiscard]] const T& operator[](std::size_t i) const noexcept requires(!std::is_same_v<T, Bytes>) {
-    return *std::launder(reinterpret_cast<const T*>(owner_->topic().payload(chunks_[i])));
+    return *std::launder(reinterpret_cast<const T*>(places_.payload(chunks_[i])));
   }
   // The bytes of sample `i` of a raw byte topic.
   [[nodiscard]] std::span<const std::byte> bytes(std::size_t i) const noexcept {
-    return {owner_->topic().payload(chunks_[i]), static_cast<std::size_t>(info_[i].size)};
+    return {places_.payload(chunks_[i]), static_cast<std::size_t>(info_[i].size)};
   }
   // Sample `i`'s place in the topic: the first's plus i.
   [[nodiscard]] std::uint64_t sequence(std::size_t i) const noexcept { return first_ + i; }
@@ -69,7 +71,8 @@ class Views {
   template <Message>
   friend class SubscriptionReader;
   // Batch `index` of `owner`'s cursor, just taken (Subscriber::hold_batch counted it).
-  Views(detail::Subscriber* owner, std::uint32_t index) : owner_{owner}, index_{index} {
+  Views(detail::Subscriber* owner, std::uint32_t index)
+      : owner_{owner}, places_{owner->topic().places()}, index_{index} {
     const auto& batch = owner->cursor().batch(index);
     chunks_ = batch.chunks;
     info_ = batch.info;
@@ -82,6 +85,7 @@ class Views {
   }
 
   detail::Subscriber* owner_ = nullptr;  // kept alive by the samples this batch counts
+  detail::Places places_{};  // the topic's, copied: sample i is found without a walk through the owner
   std::uint32_t index_ = 0;
   std::span<const std::uint32_t> chunks_;  // the batch's, unchanged while it is out
   std::span<const detail::TakenInfo> info_;  // each sample's size and stamp, copied when taken
