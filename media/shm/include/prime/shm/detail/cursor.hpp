@@ -257,17 +257,18 @@ class Cursor {
   std::size_t take_some(std::size_t max, std::vector<Taken>& out) {
     if (max == 0) return 0;
     retire_ended();
+    const auto places = topic_->places();
     const auto first = out.size();
     for (auto seq = next_; seq - next_ < max; ++seq) {
-      const auto entry = topic_->ring(seq).load(std::memory_order_acquire);
+      const auto entry = places.ring(seq).load(std::memory_order_acquire);
       if (RingEntry::ahead(entry, seq) != 0) break;
       const auto index = RingEntry::chunk(entry);
-      prefetch_for_write(&topic_->chunk(index));
-      __builtin_prefetch(topic_->payload(index));
+      prefetch_for_write(&places.chunk(index));
+      __builtin_prefetch(places.payload(index));
       out.push_back({index, seq});
     }
     for (auto i = first; i < out.size(); ++i) {
-      auto& chunk = topic_->chunk(out[i].chunk);
+      auto& chunk = places.chunk(out[i].chunk);
       chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
       if (chunk.seq.load(std::memory_order_seq_cst) != out[i].seq) {
         chunk.holders.fetch_and(~bit_);
