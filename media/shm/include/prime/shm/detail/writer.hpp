@@ -207,17 +207,16 @@ class Writer {
   // sequence cleared before the store, whose fence serves the eviction);
   // after a light one, with others later (leave).
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
-    const auto places = topic_->places();
-    auto& c = places.chunk(chunk);
+    auto& c = topic_->chunk(chunk);
     const auto seq = next_++;
     --out_;
-    describe(c, places.info(seq), size, stamp);
+    describe(c, topic_->info(seq), size, stamp);
     c.seq.store(seq, std::memory_order_release);
     to_ring(c);
-    places.ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
-    const auto old = std::exchange(in_ring_[places.ring_index(seq)], chunk);
+    topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
+    const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk);
     const bool full = fences_fully();
-    if (full && old != kNoChunk) places.chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
+    if (full && old != kNoChunk) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
     store_head(seq + 1, full);
     if (old != kNoChunk) {
       if (full) {
