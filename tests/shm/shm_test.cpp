@@ -370,6 +370,38 @@ TEST_F(ShmTest, ATopicOfAnotherLayoutIsRefusedByVersion) {
                          "does not follow from its capacity"));
 }
 
+// The parts of a topic's segment are found with sizes read once, when its
+// header was checked: a write there afterwards (a foreign or broken
+// program) sends no access out of the segment. Publishing and reading go
+// on, one at a time and in batches, every value where it was written.
+TEST_F(ShmTest, AHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheSegment) {
+  const shm::TopicQos qos{.capacity = 8, .overflow = Overflow::block, .max_held = 8};
+  auto publisher = core.publisher<int>("checked", qos);
+  auto reader = core.subscribe<int>("checked", {}, qos).subscribe();
+  auto batches = core.subscribe<int>("checked", {}, qos).batches();
+  MappedTopic{core.domain(), "checked"}.header().chunk_stride = 1ull << 40;
+  for (int round = 0; round < 3; ++round) {
+    const int first = round * 8;
+    for (int i = first; i < first + 4; ++i) ASSERT_TRUE(publisher.publish(i));
+    auto batch = publisher.loan_some(4);
+    ASSERT_TRUE(batch) << batch.error().describe();
+    ASSERT_EQ(batch->size(), 4u);
+    for (std::size_t k = 0; k < 4; ++k) (*batch)[k] = first + 4 + static_cast<int>(k);
+    std::move(*batch).publish();
+    for (int i = first; i < first + 8; ++i) {
+      auto sample = reader.try_read();
+      ASSERT_TRUE(sample) << "value " << i;
+      EXPECT_EQ(*sample->value, i);
+    }
+    {
+      const auto views = batches.try_read(8);
+      ASSERT_EQ(views.size(), 8u);
+      for (std::size_t k = 0; k < 8; ++k) EXPECT_EQ(views[k], first + static_cast<int>(k));
+    }
+    EXPECT_TRUE(batches.try_read(8).empty());  // and the publisher learns the batch is done with
+  }
+}
+
 TEST_F(ShmTest, OtherQosIsRefusedWhicheverSideOpensTheTopicFirst) {
   const shm::TopicQos sixteen{.capacity = 16}, thirty_two{.capacity = 32};
   {
