@@ -37,13 +37,24 @@ class MappedTopic {
     return within(timeout, [&] { return header().space.sleepers.load() != 0; });
   }
 
+  // Chunk `i`, ring entry and info of sequence `seq`, found by the header
+  // as it is now.
+  [[nodiscard]] shm::detail::ChunkHeader& chunk(std::size_t i) const {
+    const auto& h = header();
+    return *std::launder(reinterpret_cast<shm::detail::ChunkHeader*>(segment_->data() + h.chunks_offset + i * h.chunk_stride));
+  }
+  [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const {
+    const auto& h = header();
+    return reinterpret_cast<std::atomic<std::uint64_t>*>(segment_->data() + h.ring_offset)[seq % h.capacity];
+  }
+  [[nodiscard]] shm::detail::SampleInfo& info(std::uint64_t seq) const {
+    const auto& h = header();
+    return std::launder(reinterpret_cast<shm::detail::SampleInfo*>(segment_->data() + h.info_offset))[seq % h.capacity];
+  }
+
   // Who holds chunk `i` (its holders word: a bit per subscriber slot, the
   // ring's and the loan's).
-  [[nodiscard]] std::uint64_t holders(std::size_t i) const {
-    const auto& h = header();
-    return std::launder(reinterpret_cast<shm::detail::ChunkHeader*>(segment_->data() + h.chunks_offset + i * h.chunk_stride))
-        ->holders.load();
-  }
+  [[nodiscard]] std::uint64_t holders(std::size_t i) const { return chunk(i).holders.load(); }
   // How many chunks are held by the ring alone, and how many by anyone else
   // or anything more.
   struct Census {

@@ -50,6 +50,57 @@ class ServiceTest : public ::testing::Test {
   shm::Core core{unique_domain("service"), {.participant = "server"}};
 };
 
+// A service's segment as a foreign or broken program maps it: found by its
+// header as it is now.
+class MappedService {
+ public:
+  MappedService(const std::string& domain, const std::string& name)
+      : segment_{shm::detail::Segment::open_existing(shm::detail::segment_name(domain, "service", name))} {
+    if (!segment_) throw std::runtime_error{"no service '" + name + "' in domain '" + domain + "'"};
+  }
+  [[nodiscard]] shm::detail::ServiceHeader& header() const {
+    return *std::launder(reinterpret_cast<shm::detail::ServiceHeader*>(segment_->data()));
+  }
+  [[nodiscard]] shm::detail::CellHeader& cell(std::size_t i) const {
+    return *std::launder(reinterpret_cast<shm::detail::CellHeader*>(at(i)));
+  }
+  [[nodiscard]] shm::detail::CellTail& tail(std::size_t i) const {
+    return *std::launder(reinterpret_cast<shm::detail::CellTail*>(at(i) + header().tail_offset));
+  }
+  [[nodiscard]] std::byte* reply(std::size_t i) const { return at(i) + header().reply_offset; }
+
+  // Queues cell `i` as a caller would, with what `write` puts in it; the
+  // state the call ends in (within 10 s; queued or running if it does not).
+  template <class Write>
+  shm::detail::CellState call(std::size_t i, Write write) const {
+    using shm::detail::CellState;
+    using shm::detail::Status;
+    auto& c = cell(i);
+    const auto ticket = Status::ticket(c.status.load());
+    c.posted = 0;
+    c.next_hops = 0;
+    write(c, tail(i));
+    c.status.store(Status::pack(ticket, CellState::queued));
+    header().pending[i / 64].fetch_or(1ull << (i % 64));
+    header().requests.ring_always();
+    auto ended = [&] {
+      const auto state = Status::state(c.status.load());
+      return state != CellState::queued && state != CellState::running;
+    };
+    if (!MappedTopic::within(10s, ended)) return Status::state(c.status.load());
+    const auto state = Status::state(c.status.load());
+    c.status.store(Status::pack(ticket + 1, CellState::free));  // as its caller frees it
+    return state;
+  }
+
+ private:
+  [[nodiscard]] std::byte* at(std::size_t i) const {
+    return segment_->data() + header().cells_offset + i * header().cell_stride;
+  }
+  std::optional<shm::detail::Segment> segment_;
+};
+
+
 TEST_F(ServiceTest, ADamagedServiceFailsItsCallsByNameAndToolsPassItOver) {
   core.serve("echo", [](const Pose& p) { return p; });
   {
@@ -183,6 +234,83 @@ TEST_F(ServiceTest, AnAnswerAfterItsCallTimedOutNeverReachesALaterCall) {
     ASSERT_TRUE(got) << got.error().describe();
     ASSERT_EQ(*got, i * 10) << "each call gets its own answer";
   }
+}
+
+// A service's geometry (its cells' stride and offsets, its counts and
+// sizes) is read once, when its header is checked: a write there
+// afterwards (a foreign or broken program) sends neither server nor client
+// out of the segment, and calls go on.
+TEST_F(ServiceTest, AServiceHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheSegment) {
+  core.serve("planner", plan, {.max_clients = 2});
+  auto planner = core.chain<Pose, Path>("planner");
+  ASSERT_EQ(planner(Pose{1, 2}).steps, 3u);
+  {
+    const MappedService mapped{core.domain(), "planner"};
+    auto& h = mapped.header();
+    constexpr std::uint64_t kFar = 1ull << 40;
+    h.cell_stride = h.request_offset = h.reply_offset = h.tail_offset = h.cells_offset = kFar;
+    h.max_request_size = h.max_reply_size = kFar;
+    h.max_clients = h.calls_per_client = h.cell_count = 1000;
+  }
+  for (int i = 0; i < 20; ++i) {
+    const auto path = planner.call(Pose{static_cast<double>(i), 1});
+    ASSERT_TRUE(path) << path.error().describe();
+    EXPECT_EQ(path->steps, static_cast<std::uint32_t>(i + 1));
+    EXPECT_EQ(path->length, 2.0 * i);
+  }
+  // A participant that maps it afresh finds the damage, and says so.
+  shm::Core other{core.domain(), {.participant = "client"}};
+  const auto refused = other.chain<Pose, Path>("planner").call(Pose{1, 1});
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("service 'planner': its shared memory is damaged (1000 client slots"),
+            std::string::npos)
+      << refused.error().describe();
+}
+
+// A call a foreign or broken caller queued with sizes, a route or a cell
+// out of range fails alone, by name, or goes unanswered; the worker reads
+// nothing out of the service's segment, and other calls go on.
+TEST_F(ServiceTest, ACallDamagedInSharedMemoryFailsAloneAndTheServiceGoesOn) {
+  using shm::detail::CellState;
+  std::atomic<std::size_t> seen{0};
+  core.serve("sizes", [&](std::span<const std::byte> b) {
+    seen = b.size();
+    return std::vector<std::byte>(b.begin(), b.end());
+  }, {.max_request_size = 100, .max_reply_size = 100, .max_clients = 2});
+  core.serve("echo", [](std::span<const std::byte> b) { return std::vector<std::byte>(b.begin(), b.end()); },
+             {.max_request_size = 100, .max_reply_size = 100, .max_clients = 2});
+  auto linked = core.chain<shm::Bytes, shm::Bytes>("sizes") | core.chain<shm::Bytes, shm::Bytes>("echo");
+  const std::vector<std::byte> ten(10, std::byte{3});
+  ASSERT_EQ(linked(ten), ten);  // client slot 0 of each: cell 0
+  const MappedService sizes{core.domain(), "sizes"};
+  const auto echo_index = sizes.tail(0).next[0].service;  // where the linked call went on
+
+  EXPECT_EQ(sizes.call(1, [](auto& c, auto&) { c.request_size = 1ull << 40; }), CellState::done);
+  EXPECT_EQ(seen, 100u) << "a request's size past max_request_size ends there";
+  EXPECT_EQ(sizes.cell(1).reply_size, 100u);
+
+  EXPECT_EQ(sizes.call(1, [](auto& c, auto&) {
+    c.request_size = 10;
+    c.next_hops = 100;
+  }), CellState::failed);
+  EXPECT_NE(std::string{sizes.tail(1).error}.find("service 'sizes': a call's cell is damaged (100 services after this "
+                                                  "one, at most 7)"),
+            std::string::npos)
+      << sizes.tail(1).error;
+
+  seen = 0;
+  EXPECT_EQ(sizes.call(1, [&](auto& c, auto& tail) {
+    c.request_size = 10;
+    c.next_hops = 1;
+    tail.next[0] = {echo_index, 9999, 0};  // a cell echo does not have
+  }), CellState::done) << "as a call whose caller gave up: no answer";
+  EXPECT_EQ(seen, 0u) << "not run: its output had nowhere to go";
+
+  // A pending bit for a cell past the service's: cleared, and nothing runs.
+  sizes.header().pending[3].fetch_or(1ull << 63);
+  sizes.header().requests.ring_always();
+  EXPECT_TRUE(MappedTopic::within(10s, [&] { return sizes.header().pending[3].load() == 0; }));
+  for (int i = 0; i < 10; ++i) ASSERT_EQ(linked(ten), ten);
 }
 
 TEST_F(ServiceTest, LimitsAreErrorsThatNameTheLimitAndTheService) {

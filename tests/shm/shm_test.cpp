@@ -370,36 +370,104 @@ TEST_F(ShmTest, ATopicOfAnotherLayoutIsRefusedByVersion) {
                          "does not follow from its capacity"));
 }
 
-// The parts of a topic's segment are found with sizes read once, when its
-// header was checked: a write there afterwards (a foreign or broken
-// program) sends no access out of the segment. Publishing and reading go
-// on, one at a time and in batches, every value where it was written.
+// A topic's geometry (its capacity, counts, sizes, offsets and stride) is
+// read once, when its header is checked: a write there afterwards (a
+// foreign or broken program) sends no access out of the segment and changes
+// nothing a participant does. Publishing and reading go on, one at a time
+// and in batches, every value where it was written; a subscriber and a
+// publisher that join afterwards take the topic as it was made.
 TEST_F(ShmTest, AHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheSegment) {
   const shm::TopicQos qos{.capacity = 8, .overflow = Overflow::block, .max_held = 8};
-  auto publisher = core.publisher<int>("checked", qos);
+  std::optional<shm::Publisher<int>> publisher{core.publisher<int>("checked", qos)};
   auto reader = core.subscribe<int>("checked", {}, qos).subscribe();
   auto batches = core.subscribe<int>("checked", {}, qos).batches();
-  MappedTopic{core.domain(), "checked"}.header().chunk_stride = 1ull << 40;
-  for (int round = 0; round < 3; ++round) {
-    const int first = round * 8;
-    for (int i = first; i < first + 4; ++i) ASSERT_TRUE(publisher.publish(i));
-    auto batch = publisher.loan_some(4);
+  {
+    const MappedTopic mapped{core.domain(), "checked"};
+    auto& h = mapped.header();
+    constexpr std::uint64_t kFar = 1ull << 40;
+    h.chunk_stride = h.chunk_count = h.capacity = h.max_message_size = kFar;
+    h.ring_offset = h.info_offset = h.chunks_offset = kFar;
+    h.max_subscribers = 1000;  // slots past the header's 62
+    h.max_held = 1ull << 30;
+    h.overflow = 7;
+  }
+  auto publish_and_read = [&](int first, auto&... readers) {
+    for (int i = first; i < first + 4; ++i) ASSERT_TRUE(publisher->publish(i));
+    auto batch = publisher->loan_some(4);
     ASSERT_TRUE(batch) << batch.error().describe();
     ASSERT_EQ(batch->size(), 4u);
     for (std::size_t k = 0; k < 4; ++k) (*batch)[k] = first + 4 + static_cast<int>(k);
     std::move(*batch).publish();
-    for (int i = first; i < first + 8; ++i) {
-      auto sample = reader.try_read();
-      ASSERT_TRUE(sample) << "value " << i;
-      EXPECT_EQ(*sample->value, i);
-    }
+    auto each = [&](auto& one) {
+      for (int i = first; i < first + 8; ++i) {
+        auto sample = one.try_read();
+        ASSERT_TRUE(sample) << "value " << i;
+        EXPECT_EQ(*sample->value, i);
+      }
+    };
+    (each(readers), ...);
     {
       const auto views = batches.try_read(8);
       ASSERT_EQ(views.size(), 8u);
       for (std::size_t k = 0; k < 8; ++k) EXPECT_EQ(views[k], first + static_cast<int>(k));
     }
     EXPECT_TRUE(batches.try_read(8).empty());  // and the publisher learns the batch is done with
-  }
+  };
+  for (int round = 0; round < 3; ++round) publish_and_read(round * 8, reader);
+  const auto joining = core.subscribe<int>("checked", {}, qos);
+  EXPECT_EQ(joining.topic_qos().capacity, 8u) << "the topic as it was made";
+  EXPECT_EQ(joining.topic_qos().overflow, Overflow::block);
+  auto joined = joining.subscribe();
+  publish_and_read(24, reader, joined);
+  publisher.reset();
+  publisher.emplace(core.publisher<int>("checked", qos));
+  publish_and_read(32, reader, joined);
+  auto refused = publisher->loan_some(9);  // the ring's 8 places, under block
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->size(), 8u) << "block, with the ring's capacity of 8";
+}
+
+// A ring entry naming a chunk the topic does not have, or a size larger
+// than its messages may be (written by a foreign or broken program), is
+// not followed out of the segment: the sample is lost, or its bytes end at
+// the topic's maximum. A larger maximum written in the header lets no
+// larger message in.
+TEST_F(ShmTest, ASampleDamagedInSharedMemoryIsLostOrCutNotReadOutOfTheSegment) {
+  const shm::TopicQos qos{.capacity = 8, .max_message_size = 64, .overflow = Overflow::block};
+  auto publisher = core.publisher<shm::Bytes>("raw", qos);
+  auto reader = core.subscribe<shm::Bytes>("raw", {}, qos).subscribe();
+  auto batches = core.subscribe<shm::Bytes>("raw", {}, qos).batches();
+  const std::vector<std::byte> ten(10, std::byte{7});
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(publisher.publish(std::span<const std::byte>{ten}));
+  const MappedTopic mapped{core.domain(), "raw"};
+  const auto entry = mapped.ring(1).load();
+  mapped.ring(1).store(shm::detail::RingEntry::pack(1, static_cast<std::uint32_t>(mapped.header().chunk_count + 5)));
+  mapped.chunk(shm::detail::RingEntry::chunk(mapped.ring(2).load())).size = 1ull << 40;
+  mapped.info(2).size.store(1ull << 40);
+  mapped.header().max_message_size = 1ull << 40;
+
+  auto oversized = publisher.loan(65);
+  ASSERT_FALSE(oversized) << "the maximum is the topic's as it was made";
+  EXPECT_NE(oversized.error().message.find("a message of 65 bytes exceeds its maximum of 64 bytes"), std::string::npos)
+      << oversized.error().describe();
+
+  auto first = reader.try_read();
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->value.bytes().size(), 10u);
+  auto third = reader.try_read();
+  ASSERT_TRUE(third);
+  EXPECT_EQ(third->value.sequence(), 2u) << "the sample whose entry names no chunk of the topic is lost";
+  EXPECT_EQ(reader.lost(), 1u);
+  EXPECT_EQ(third->value.bytes().size(), 64u) << "a size past the maximum ends there";
+
+  const auto before = batches.try_read(8);
+  ASSERT_EQ(before.size(), 1u) << "a batch ends before the damaged entry";
+  EXPECT_EQ(before.bytes(0).size(), 10u);
+  const auto after = batches.try_read(8);
+  ASSERT_EQ(after.size(), 1u);
+  EXPECT_EQ(after.sequence(0), 2u);
+  EXPECT_EQ(after.bytes(0).size(), 64u);
+  mapped.ring(1).store(entry);
 }
 
 TEST_F(ShmTest, OtherQosIsRefusedWhicheverSideOpensTheTopicFirst) {

@@ -265,7 +265,7 @@ class Publisher {
 
  private:
   std::expected<void, Error> check_size(std::size_t size) const {
-    const auto max = owner_->writer.topic()->header().max_message_size;
+    const auto max = owner_->writer.topic()->geometry().max_message_size;
     if (size <= max) return {};
     return std::unexpected(Error{Errc::limit_exceeded, "topic '" + name() + "': a message of " + std::to_string(size) +
                                                            " bytes exceeds its maximum of " + std::to_string(max) + " bytes"});

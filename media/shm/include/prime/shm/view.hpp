@@ -53,7 +53,7 @@ class View {
 
   // The bytes of a raw byte topic's message.
   [[nodiscard]] std::span<const std::byte> bytes() const noexcept {
-    return {owner_->topic().payload(chunk_), static_cast<std::size_t>(owner_->topic().chunk(chunk_).size)};
+    return {owner_->topic().payload(chunk_), owner_->topic().places().size(owner_->topic().chunk(chunk_).size)};
   }
   // Its place in the topic: 0 for the first sample ever published.
   [[nodiscard]] std::uint64_t sequence() const noexcept { return seq_; }

@@ -68,8 +68,9 @@ class Binding {
                                 " us (min_interval)");
     if (const auto depth = h.queue_depth.load(); depth > 0 && service.queued() >= depth)
       return limit(service, std::to_string(depth) + " requests wait for a worker already (queue_depth)");
-    const auto first = slot_ * h.calls_per_client;
-    for (std::size_t k = 0; k < h.calls_per_client; ++k) {
+    const auto calls = service.geometry().calls_per_client;
+    const auto first = slot_ * calls;
+    for (std::size_t k = 0; k < calls; ++k) {
       auto& status = service.cell(first + k).status;
       auto s = status.load();
       if (Status::state(s) != CellState::free) continue;
@@ -78,7 +79,7 @@ class Binding {
         return first + k;
       }
     }
-    return limit(service, "this client has " + std::to_string(h.calls_per_client) +
+    return limit(service, "this client has " + std::to_string(calls) +
                               " calls in flight already (calls_per_client)");
   }
 
@@ -125,7 +126,7 @@ class Binding {
   std::expected<void, Error> take_slot(Service& service) {
     auto& h = service.header();
     for (int pass = 0; pass < 2; ++pass) {
-      for (std::size_t c = 0; c < h.max_clients; ++c) {
+      for (std::size_t c = 0; c < service.geometry().max_clients; ++c) {
         ParticipantId free = 0;
         if (h.clients[c].owner.compare_exchange_strong(free, registry_->me())) {
           slot_ = c;
@@ -135,13 +136,14 @@ class Binding {
       if (service.reclaim_dead_clients() == 0) break;
     }
     return std::unexpected(Error{Errc::limit_exceeded, "service '" + name_ + "' has its maximum of " +
-                                                           std::to_string(h.max_clients) + " clients (max_clients)"});
+                                                           std::to_string(service.geometry().max_clients) + " clients (max_clients)"});
   }
 
   void release_slot() {
     if (!service_) return;
     auto& h = service_->header();
-    for (std::size_t k = 0; k < h.calls_per_client; ++k) service_->release(slot_ * h.calls_per_client + k);
+    const auto calls = service_->geometry().calls_per_client;
+    for (std::size_t k = 0; k < calls; ++k) service_->release(slot_ * calls + k);
     h.clients[slot_].owner.store(0);
     service_.reset();
   }
@@ -222,7 +224,7 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   auto& first = held.front();
   auto& c = first.service->cell(first.cell);
   try {
-    c.request_size = write(first.service->request(first.cell), first.service->header().max_request_size);
+    c.request_size = write(first.service->request(first.cell), first.service->geometry().max_request_size);
   } catch (const Failure& f) {
     release_all();
     return std::unexpected(f.error());
@@ -279,10 +281,10 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   std::expected<void, Error> result;
   if (answer.status.load() == failed) {
     result = std::unexpected(Error{errc_from(static_cast<int>(answer.errc)).value_or(Errc::block_failed),
-                                   std::string{last.service->tail(last.cell).error}});
+                                   last.service->error(last.cell)});
   } else {
     try {
-      read(last.service->reply(last.cell), answer.reply_size);
+      read(last.service->reply(last.cell), last.service->reply_size(answer));
     } catch (const Failure& f) {
       result = std::unexpected(f.error());
     }

@@ -80,16 +80,17 @@ class Cursor {
   Cursor(std::shared_ptr<Topic> topic, std::size_t history, bool observer, std::atomic<std::uint32_t>* views)
       : topic_{std::move(topic)}, views_{views} {
     auto& h = topic_->header();
-    by_cursor_ = !observer && static_cast<Overflow>(h.overflow) == Overflow::block;
-    max_held_ = h.max_held;
+    const auto& g = topic_->geometry();
+    by_cursor_ = !observer && topic_->overflow() == Overflow::block;
+    max_held_ = g.max_held;
     // As many batches as samples it may hold, each sized when taken.
-    batches_ = std::vector<TakenBatch>(observer ? 1 : h.max_held);
+    batches_ = std::vector<TakenBatch>(observer ? 1 : g.max_held);
     for (std::uint32_t i = 0; i < batches_.size(); ++i) free_.push_back(i);
     live_.reserve(batches_.size());
-    in_batch_.resize(h.chunk_count);
+    in_batch_.resize(g.chunk_count());
     const auto me = topic_->registry().me();
     const auto first = observer ? kSlots - 1 : 0;
-    const auto end = observer ? kSlots : h.max_subscribers;
+    const auto end = observer ? kSlots : g.max_subscribers;
     for (int pass = 0; pass < 2 && slot_ == kNone; ++pass) {
       for (std::size_t i = first; i < end; ++i) {
         ParticipantId free = 0;
@@ -103,16 +104,16 @@ class Cursor {
     if (slot_ == kNone)
       throw Failure{{Errc::limit_exceeded, observer ? "topic '" + topic_->name() + "' is observed already"
                                                     : "topic '" + topic_->name() + "' has its maximum of " +
-                                                          std::to_string(h.max_subscribers) + " subscribers"}};
+                                                          std::to_string(g.max_subscribers) + " subscribers"}};
     bit_ = 1ull << slot_;
     topic_->release_subscriber_holds(slot_);  // nothing of an earlier owner lingers
     h.subscribers[slot_].lagging.store(0);
     h.subscribers[slot_].kept_end.store(0);
     const auto head = h.head.load();
-    const auto back = std::min<std::uint64_t>({history, h.capacity, head});
+    const auto back = std::min<std::uint64_t>({history, g.capacity, head});
     next_ = head - back;
     acked_ = next_;
-    ack_every_ = std::clamp<std::uint64_t>(h.capacity / 8, 1, 16);
+    ack_every_ = std::clamp<std::uint64_t>(g.capacity / 8, 1, 16);
     // The slot's bit in full_fences_wanted is clear: whoever freed the slot
     // (the destructor, or reclaim_subscriber) cleared it.
     if (!heavy_fences_allowed()) ask_for_full_fences(Clock::now());
@@ -148,7 +149,7 @@ class Cursor {
         acknowledge_all();
         return std::nullopt;
       }
-      if (ahead == 0) {
+      if (ahead == 0 && topic_->places().names_chunk(entry)) {
         const auto index = RingEntry::chunk(entry);
         auto& chunk = topic_->chunk(index);
         __builtin_prefetch(topic_->payload(index));  // arrives while the hold is taken
@@ -193,7 +194,7 @@ class Cursor {
       for (auto seq = next_; seq - next_ < max; ++seq) {
         const auto entry = places.ring(seq).load(std::memory_order_acquire);
         const auto ahead = RingEntry::ahead(entry, seq);
-        if (ahead != 0) {
+        if (ahead != 0 || !places.names_chunk(entry)) {
           if (seq == next_ && ahead < 0) {  // nothing new
             free_.push_back(index);
             caught_up();
@@ -207,7 +208,7 @@ class Cursor {
         b.chunks.push_back(chunk);
         if (may_keep) {
           const auto& info = places.info(seq);
-          b.info.push_back({info.size.load(std::memory_order_acquire), info.stamp.load(std::memory_order_acquire)});
+          b.info.push_back({places.size(info.size.load(std::memory_order_acquire)), info.stamp.load(std::memory_order_acquire)});
         } else {
           prefetch_for_write(&places.chunk(chunk));  // for the hold
         }
@@ -228,7 +229,7 @@ class Cursor {
           b.chunks.resize(i);  // later ones are not held yet
           break;
         }
-        b.info.push_back({chunk.size, chunk.stamp});
+        b.info.push_back({places.size(chunk.size), chunk.stamp});
       }
       if (!b.chunks.empty()) break;
       skip_overwritten();
@@ -261,7 +262,7 @@ class Cursor {
     const auto first = out.size();
     for (auto seq = next_; seq - next_ < max; ++seq) {
       const auto entry = places.ring(seq).load(std::memory_order_acquire);
-      if (RingEntry::ahead(entry, seq) != 0) break;
+      if (RingEntry::ahead(entry, seq) != 0 || !places.names_chunk(entry)) break;
       const auto index = RingEntry::chunk(entry);
       prefetch_for_write(&places.chunk(index));
       __builtin_prefetch(places.payload(index));
@@ -368,9 +369,9 @@ class Cursor {
   // The next sample was overwritten before it was taken: lost to us. Skip
   // to the oldest still in the ring.
   void skip_overwritten() {
-    auto& h = topic_->header();
-    const auto head = h.head.load(std::memory_order_acquire);
-    skip_to(std::max(next_ + 1, head > h.capacity ? head - h.capacity : 0));
+    const auto head = topic_->header().head.load(std::memory_order_acquire);
+    const auto capacity = topic_->geometry().capacity;
+    skip_to(std::max(next_ + 1, head > capacity ? head - capacity : 0));
   }
 
   // Whether a batch from `seq` is kept by the cursor: on a `block` topic,

@@ -176,11 +176,20 @@ void write_schema(char (&to)[N], const std::string& schema, std::size_t size) {
 }
 
 // Where the parts of a topic's segment lie, from its QoS and message size.
+// A process that maps a topic reads these four from its header once, checks
+// them (damage) and goes by that copy from then on, never by the header: a
+// later write there (a foreign or broken program) then sends no access out
+// of the segment.
 struct TopicGeometry {
   std::size_t capacity;
   std::size_t max_message_size;
   std::size_t max_subscribers;
   std::size_t max_held;
+
+  // What `h` records, read once.
+  [[nodiscard]] static TopicGeometry of(const TopicHeader& h) noexcept {
+    return {h.capacity, h.max_message_size, h.max_subscribers, h.max_held};
+  }
 
   // The ring's chunks; every subscriber's allowance of held samples that the
   // ring no longer names; one that an observing tool may hold; one the
@@ -199,26 +208,27 @@ struct TopicGeometry {
   [[nodiscard]] constexpr std::size_t bytes() const { return chunks_offset() + chunk_count() * chunk_stride(); }
 };
 
-// What is wrong with a topic's header against the segment it heads, which
-// is `size` bytes long; empty when nothing is. Whoever maps a segment reads
-// it with offsets and counts from its header: one written by a foreign or
-// broken program must not send them out of the segment (or divide by zero).
-inline std::string damage(const TopicHeader& h, std::size_t size) {
-  if (h.capacity == 0) return "a capacity of 0";
-  if (h.max_subscribers > kMaxSubscribers)
-    return std::to_string(h.max_subscribers) + " subscriber slots, more than " + std::to_string(kMaxSubscribers);
+// What is wrong with geometry `g`, read from header `h`, against the segment
+// `h` heads, which is `size` bytes long; empty when nothing is. A process
+// addresses the segment by `g`: one written by a foreign or broken program
+// must not send it out of the segment (or divide by zero). What else `h`
+// records of its layout must follow from `g`.
+inline std::string damage(const TopicHeader& h, const TopicGeometry& g, std::size_t size) {
+  if (g.capacity == 0) return "a capacity of 0";
+  if (g.max_subscribers > kMaxSubscribers)
+    return std::to_string(g.max_subscribers) + " subscriber slots, more than " + std::to_string(kMaxSubscribers);
   // Each bounded before the geometry multiplies them: a size can then not wrap around.
   constexpr std::uint64_t kBound = 1ull << 40;
-  if (h.capacity >= kBound || h.max_message_size >= kBound || h.max_held >= (1u << 24))
-    return "a capacity of " + std::to_string(h.capacity) + ", messages of " + std::to_string(h.max_message_size) +
-           " bytes and max_held " + std::to_string(h.max_held);
-  const TopicGeometry g{h.capacity, h.max_message_size, h.max_subscribers, h.max_held};
+  if (g.capacity >= kBound || g.max_message_size >= kBound || g.max_held >= (1u << 24))
+    return "a capacity of " + std::to_string(g.capacity) + ", messages of " + std::to_string(g.max_message_size) +
+           " bytes and max_held " + std::to_string(g.max_held);
   if (g.chunk_count() >= kNoChunk) return std::to_string(g.chunk_count()) + " chunks, more than a ring entry can name";
   if (h.chunk_count != g.chunk_count() || h.chunk_stride != g.chunk_stride() || h.ring_offset != g.ring_offset() ||
       h.info_offset != g.info_offset() || h.chunks_offset != g.chunks_offset())
     return "a layout that does not follow from its capacity, message size and subscriber slots";
   if (g.bytes() > size)
     return std::to_string(g.bytes()) + " bytes of layout in a segment of " + std::to_string(size);
+  if (h.overflow > 1) return "overflow " + std::to_string(h.overflow) + ", neither drop_oldest (0) nor block (1)";
   return {};
 }
 

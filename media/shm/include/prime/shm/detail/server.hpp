@@ -58,7 +58,7 @@ class Server {
     auto& h = service_->header();
     auto me = service_->registry().me();
     h.server.compare_exchange_strong(me, 0);
-    for (std::size_t i = 0; i < h.cell_count; ++i) service_->tail(i).answered.ring();  // callers see it gone
+    for (std::size_t i = 0; i < service_->geometry().cell_count(); ++i) service_->tail(i).answered.ring();  // callers see it gone
   }
 
   // One worker: takes requests until `stop`, sleeping when there are none.
@@ -100,6 +100,11 @@ class Server {
         const auto pick = (std::rotr(bits, rotate) & -std::rotr(bits, rotate));  // lowest bit from `rotate` on
         const auto bit = std::rotl(pick, rotate);
         const auto cell = w * 64 + static_cast<std::size_t>(std::countr_zero(bit));
+        if (!service_->has_cell(cell)) {  // raised by a foreign or broken program: no call is there
+          h.pending[w].fetch_and(~bit, std::memory_order_relaxed);
+          bits &= ~bit;
+          continue;
+        }
         // Fetch the cell's status and request while the bit is taken: the
         // transfers overlap instead of following one another.
         prefetch_for_write(&service_->cell(cell).status);
@@ -123,22 +128,35 @@ class Server {
     const auto ticket = Status::ticket(s);
     if (!c.status.compare_exchange_strong(s, Status::pack(ticket, CellState::running))) return;
 
+    // A linked call's route, read once from the cell. One longer than a
+    // call can be (written by a foreign or broken caller) fails the call;
+    // a hop to a cell a service does not have, as if its caller gave up.
+    const std::uint32_t hops = c.next_hops;
+    if (hops >= kMaxHops) {
+      h.failed.fetch_add(1);
+      const Error damaged{Errc::type_mismatch, "service '" + service_->name() + "': a call's cell is damaged (" +
+                                                   std::to_string(hops) + " services after this one, at most " +
+                                                   std::to_string(kMaxHops - 1) + ")"};
+      return answer(i, ticket, &damaged);
+    }
+    Hop route[kMaxHops - 1];
+    std::copy(service_->tail(i).next, service_->tail(i).next + hops, route);
+
     // Where the answer goes: this cell, or the next service's cell of a linked call.
     Service* next = nullptr;
     std::byte* out = service_->reply(i);
-    std::size_t capacity = h.max_reply_size;
-    auto& tail = service_->tail(i);
-    if (c.next_hops > 0) {
-      next = following(tail.next[0].service);
-      if (!next || !take_over(*next, tail.next[0])) return finish(i, ticket, false);  // its caller gave up
-      out = next->request(tail.next[0].cell);
-      capacity = next->header().max_request_size;
+    std::size_t capacity = service_->geometry().max_reply_size;
+    if (hops > 0) {
+      next = following(route[0].service);
+      if (!next || !take_over(*next, route[0])) return finish(i, ticket, false);  // its caller gave up
+      out = next->request(route[0].cell);
+      capacity = next->geometry().max_request_size;
     }
 
     std::optional<Error> error;
     std::size_t size = 0;
     try {
-      size = handler_(service_->request(i), c.request_size, out, capacity);
+      size = handler_(service_->request(i), service_->request_size(c), out, capacity);
     } catch (const Failure& f) {
       error = f.error();
     } catch (const std::exception& e) {
@@ -152,7 +170,7 @@ class Server {
       error->message = "service '" + service_->name() + "': " + error->message;
       if (c.posted && report_) report_(*error);
       if (!next) return answer(i, ticket, &*error);
-      fail_linked(c, tail, *next, *error);
+      fail_linked(route, hops, *next, *error);
       return finish(i, ticket, false);
     }
     h.served.fetch_add(1);
@@ -162,13 +180,13 @@ class Server {
       return answer(i, ticket, nullptr);
     }
     // Linked: the output already lies in the next service's cell; hand it on.
-    const auto hop = tail.next[0];
+    const auto hop = route[0];
     auto& to = next->cell(hop.cell);
     to.request_size = size;
     to.stamp = c.stamp;
     to.posted = c.posted;
-    to.next_hops = c.next_hops - 1;
-    std::copy(tail.next + 1, tail.next + c.next_hops, next->tail(hop.cell).next);
+    to.next_hops = hops - 1;
+    std::copy(route + 1, route + hops, next->tail(hop.cell).next);
     auto held = Status::pack(hop.ticket, CellState::forwarding);
     if (to.status.compare_exchange_strong(held, Status::pack(hop.ticket, CellState::queued))) {
       h.forwarded_out.fetch_add(1);
@@ -181,8 +199,9 @@ class Server {
   }
 
   // Takes the caller's cell in the next service for writing, if the caller
-  // still waits for it.
+  // still waits for it (and the cell is one the service has).
   static bool take_over(Service& next, const Hop& hop) {
+    if (!next.has_cell(hop.cell)) return false;
     auto claimed = Status::pack(hop.ticket, CellState::claimed);
     return next.cell(hop.cell).status.compare_exchange_strong(claimed, Status::pack(hop.ticket, CellState::forwarding));
   }
@@ -209,18 +228,19 @@ class Server {
     if (!c.status.compare_exchange_strong(running, after)) service_->free_abandoned(i, ticket);
   }
 
-  // A linked call failed here: the caller waits on its last cell, so the
-  // error goes there; the next cell, held for the output, goes back.
-  void fail_linked(const CellHeader& c, const CellTail& tail, Service& next, const Error& error) {
-    const auto first = tail.next[0];
-    const auto last = tail.next[c.next_hops - 1];
-    if (c.next_hops > 1) {
+  // A linked call failed here: the caller waits on its last cell (of the
+  // `hops` of its `route`), so the error goes there; the next cell, held for
+  // the output, goes back.
+  void fail_linked(const Hop* route, std::uint32_t hops, Service& next, const Error& error) {
+    const auto first = route[0];
+    const auto last = route[hops - 1];
+    if (hops > 1) {
       auto held = Status::pack(first.ticket, CellState::forwarding);
       if (!next.cell(first.cell).status.compare_exchange_strong(held, Status::pack(first.ticket, CellState::claimed)))
         next.free_abandoned(first.cell, first.ticket);
     }
-    Service* end = c.next_hops > 1 ? following(last.service) : &next;
-    if (!end || (c.next_hops > 1 && !take_over(*end, last))) return;
+    Service* end = hops > 1 ? following(last.service) : &next;
+    if (!end || (hops > 1 && !take_over(*end, last))) return;
     auto& to = end->cell(last.cell);
     write_error(to, end->tail(last.cell), error);
     auto held = Status::pack(last.ticket, CellState::forwarding);
@@ -260,7 +280,7 @@ class Server {
   // told), what waited is queued again, what was abandoned is freed.
   void recover() {
     auto& h = service_->header();
-    for (std::size_t i = 0; i < h.cell_count; ++i) {
+    for (std::size_t i = 0; i < service_->geometry().cell_count(); ++i) {
       auto& c = service_->cell(i);
       const auto s = c.status.load();
       const auto ticket = Status::ticket(s);

@@ -2,6 +2,9 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
+#include <cstring>
+
 #include <atomic>
 #include <bit>
 #include <chrono>
@@ -41,7 +44,8 @@ class Service {
     const auto index = registry->add(EndpointKind::service, name);
     const auto segment_name = detail::segment_name(registry->domain(), "service", name);
     const auto what = "service '" + name + "'";
-    const ServiceGeometry geometry{spec.qos.max_request_size, spec.qos.max_reply_size, cell_count(spec.qos)};
+    const ServiceGeometry geometry{spec.qos.max_request_size, spec.qos.max_reply_size, spec.qos.max_clients,
+                                   spec.qos.calls_per_client};
     while (true) {
       auto segment = Segment::open(
           segment_name, registry->permissions(), geometry.bytes(), what,
@@ -51,7 +55,7 @@ class Service {
       auto& h = service->header();
       if (registry->alive(h.server.load()))
         throw Failure{{Errc::in_use, what + " is served already by " + registry->describe(h.server.load())}};
-      if (h.request_type == spec.request_type && h.reply_type == spec.reply_type && same_limits(h, spec.qos))
+      if (h.request_type == spec.request_type && h.reply_type == spec.reply_type && same_limits(service->geometry(), spec.qos))
         return service;
       Segment::remove(segment_name);  // an earlier server's, for other types or limits: start afresh
     }
@@ -64,7 +68,7 @@ class Service {
     if (!segment || segment->size() < sizeof(ServiceHeader)) return nullptr;
     const auto* h = std::launder(reinterpret_cast<const ServiceHeader*>(segment->data()));
     if (h->magic.load(std::memory_order_acquire) != kServiceMagic || h->layout != kServiceLayout) return nullptr;
-    refuse_damaged(name, *h, segment->size());
+    (void)checked_geometry(name, *h, segment->size());  // before it takes a registry entry
     const auto index = registry->add(EndpointKind::service, name);
     return std::shared_ptr<Service>{new Service{std::move(registry), name, index, std::move(*segment)}};
   }
@@ -73,18 +77,34 @@ class Service {
   [[nodiscard]] std::uint32_t index() const noexcept { return index_; }  // its registry entry
   [[nodiscard]] Registry& registry() const noexcept { return *registry_; }
   [[nodiscard]] const std::shared_ptr<Registry>& registry_handle() const noexcept { return registry_; }
+  // Its shared state. What it fixed at creation is read through
+  // geometry(), never here: see ServiceGeometry.
   [[nodiscard]] ServiceHeader& header() const noexcept { return *header_; }
+  [[nodiscard]] const ServiceGeometry& geometry() const noexcept { return geometry_; }
+  // Whether `i` names one of its cells: an index read from shared memory
+  // (a pending bit, a linked call's hop) is checked before it is used.
+  [[nodiscard]] bool has_cell(std::size_t i) const noexcept { return i < geometry_.cell_count(); }
   [[nodiscard]] CellHeader& cell(std::size_t i) const noexcept {
-    return *std::launder(reinterpret_cast<CellHeader*>(cells_ + i * header_->cell_stride));
+    return *std::launder(reinterpret_cast<CellHeader*>(cells_ + i * stride_));
   }
   [[nodiscard]] CellTail& tail(std::size_t i) const noexcept {
-    return *std::launder(reinterpret_cast<CellTail*>(cells_ + i * header_->cell_stride + header_->tail_offset));
+    return *std::launder(reinterpret_cast<CellTail*>(cells_ + i * stride_ + geometry_.tail_offset()));
   }
   [[nodiscard]] std::byte* request(std::size_t i) const noexcept {
-    return cells_ + i * header_->cell_stride + header_->request_offset;
+    return cells_ + i * stride_ + geometry_.request_offset();
   }
-  [[nodiscard]] std::byte* reply(std::size_t i) const noexcept {
-    return cells_ + i * header_->cell_stride + header_->reply_offset;
+  [[nodiscard]] std::byte* reply(std::size_t i) const noexcept { return cells_ + i * stride_ + geometry_.reply_offset(); }
+  // A request's or reply's size as shared memory records it, within its room.
+  [[nodiscard]] std::size_t request_size(const CellHeader& c) const noexcept {
+    return static_cast<std::size_t>(std::min<std::uint64_t>(c.request_size, geometry_.max_request_size));
+  }
+  [[nodiscard]] std::size_t reply_size(const CellHeader& c) const noexcept {
+    return static_cast<std::size_t>(std::min<std::uint64_t>(c.reply_size, geometry_.max_reply_size));
+  }
+  // The error a failed call's cell carries, within its room.
+  [[nodiscard]] std::string error(std::size_t i) const {
+    const auto& text = tail(i).error;
+    return {text, ::strnlen(text, kErrorCapacity)};
   }
   // Whether the name still leads to this segment (a server that came back
   // for other types made a new one).
@@ -94,10 +114,10 @@ class Service {
     const auto& h = *header_;
     return {.workers = h.workers.load(),
             .timeout = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::nanoseconds{h.timeout_ns.load()}),
-            .max_request_size = h.max_request_size,
-            .max_reply_size = h.max_reply_size,
-            .max_clients = h.max_clients,
-            .calls_per_client = h.calls_per_client,
+            .max_request_size = geometry_.max_request_size,
+            .max_reply_size = geometry_.max_reply_size,
+            .max_clients = geometry_.max_clients,
+            .calls_per_client = geometry_.calls_per_client,
             .min_interval = std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::nanoseconds{h.min_interval_ns.load()}),
             .queue_depth = h.queue_depth.load()};
   }
@@ -126,12 +146,12 @@ class Service {
   // What a live worker holds is abandoned instead: that worker frees it.
   std::size_t reclaim_dead_clients() const {
     std::size_t n = 0;
-    for (std::size_t c = 0; c < header_->max_clients; ++c) {
+    for (std::size_t c = 0; c < geometry_.max_clients; ++c) {
       auto& slot = header_->clients[c];
       auto owner = slot.owner.load();
       if (owner == 0 || owner == kReclaiming || registry_->alive(owner)) continue;
       if (!slot.owner.compare_exchange_strong(owner, kReclaiming)) continue;
-      for (std::size_t k = 0; k < header_->calls_per_client; ++k) release(c * header_->calls_per_client + k);
+      for (std::size_t k = 0; k < geometry_.calls_per_client; ++k) release(c * geometry_.calls_per_client + k);
       slot.last_request.store(0);
       slot.owner.store(0);
       ++n;
@@ -168,13 +188,13 @@ class Service {
         index_{static_cast<std::uint32_t>(index)},
         segment_{std::move(segment)},
         header_{std::launder(reinterpret_cast<ServiceHeader*>(segment_.data()))},
-        cells_{segment_.data() + header_->cells_offset} {}
+        geometry_{checked_geometry(name_, *header_, segment_.size())},
+        cells_{segment_.data() + geometry_.cells_offset()},
+        stride_{geometry_.cell_stride()} {}
 
-  static std::size_t cell_count(const ServiceQos& qos) { return qos.max_clients * qos.calls_per_client; }
-
-  static bool same_limits(const ServiceHeader& h, const ServiceQos& q) {
-    return h.max_request_size == q.max_request_size && h.max_reply_size == q.max_reply_size &&
-           h.max_clients == q.max_clients && h.calls_per_client == q.calls_per_client;
+  static bool same_limits(const ServiceGeometry& g, const ServiceQos& q) {
+    return g.max_request_size == q.max_request_size && g.max_reply_size == q.max_reply_size &&
+           g.max_clients == q.max_clients && g.calls_per_client == q.calls_per_client;
   }
 
   static bool is_set_up(const std::string& name, std::byte* data, std::size_t size) {
@@ -184,12 +204,14 @@ class Service {
     if (magic == 0) return false;
     if (magic != kServiceMagic || h->layout != kServiceLayout)
       throw Failure{{Errc::type_mismatch, "service '" + name + "': made by another version of Prime"}};
-    refuse_damaged(name, *h, size);
-    return true;
+    return true;  // its geometry is checked when it is mapped (checked_geometry)
   }
-  static void refuse_damaged(const std::string& name, const ServiceHeader& header, std::size_t size) {
-    if (const auto what = damage(header, size); !what.empty())
+  // The geometry `header` records, read once and checked against the segment.
+  static ServiceGeometry checked_geometry(const std::string& name, const ServiceHeader& header, std::size_t size) {
+    const auto geometry = ServiceGeometry::of(header);
+    if (const auto what = damage(header, geometry, size); !what.empty())
       throw Failure{{Errc::type_mismatch, "service '" + name + "': its shared memory is damaged (" + what + ")"}};
+    return geometry;
   }
 
   static void set_up(std::byte* data, const ServiceSpec& spec, const ServiceGeometry& geometry) {
@@ -203,13 +225,13 @@ class Service {
     h->max_reply_size = q.max_reply_size;
     h->max_clients = q.max_clients;
     h->calls_per_client = q.calls_per_client;
-    h->cell_count = geometry.cell_count;
+    h->cell_count = geometry.cell_count();
     h->cell_stride = geometry.cell_stride();
     h->request_offset = geometry.request_offset();
     h->reply_offset = geometry.reply_offset();
     h->tail_offset = geometry.tail_offset();
     h->cells_offset = geometry.cells_offset();
-    for (std::size_t i = 0; i < geometry.cell_count; ++i) {
+    for (std::size_t i = 0; i < geometry.cell_count(); ++i) {
       auto* cell = data + h->cells_offset + i * h->cell_stride;
       ::new (cell) CellHeader{};
       ::new (cell + h->tail_offset) CellTail{};
@@ -222,7 +244,9 @@ class Service {
   std::uint32_t index_;
   Segment segment_;
   ServiceHeader* header_;
+  ServiceGeometry geometry_;  // read once from the header, and checked
   std::byte* cells_;
+  std::size_t stride_;  // from one cell to the next
 };
 
 }  // namespace prime::shm::detail

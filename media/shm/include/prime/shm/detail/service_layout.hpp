@@ -122,31 +122,42 @@ struct ServiceHeader {
 };
 static_assert(offsetof(ServiceHeader, pending) % 64 == 0 && offsetof(ServiceHeader, clients) % 64 == 0);
 
+// Where the parts of a service's segment lie, from its limits. As a topic's
+// (TopicGeometry): a process reads it from the header once, checks it and
+// goes by that copy from then on.
 struct ServiceGeometry {
   std::size_t max_request_size;
   std::size_t max_reply_size;
-  std::size_t cell_count;
+  std::size_t max_clients;
+  std::size_t calls_per_client;
+
+  // What `h` records, read once.
+  [[nodiscard]] static ServiceGeometry of(const ServiceHeader& h) noexcept {
+    return {h.max_request_size, h.max_reply_size, h.max_clients, h.calls_per_client};
+  }
+
+  [[nodiscard]] constexpr std::size_t cell_count() const { return max_clients * calls_per_client; }
 
   [[nodiscard]] constexpr std::size_t reply_offset() const { return sizeof(CellHeader); }
   [[nodiscard]] constexpr std::size_t request_offset() const { return reply_offset() + round_up(max_reply_size, 64); }
   [[nodiscard]] constexpr std::size_t tail_offset() const { return request_offset() + round_up(max_request_size, 64); }
   [[nodiscard]] constexpr std::size_t cell_stride() const { return round_up(tail_offset() + sizeof(CellTail), 64); }
   [[nodiscard]] constexpr std::size_t cells_offset() const { return round_up(sizeof(ServiceHeader), 64); }
-  [[nodiscard]] constexpr std::size_t bytes() const { return cells_offset() + cell_count * cell_stride(); }
+  [[nodiscard]] constexpr std::size_t bytes() const { return cells_offset() + cell_count() * cell_stride(); }
 };
 
-// What is wrong with a service's header against its `size`-byte segment;
-// empty when nothing is (as for a topic's: see damage(TopicHeader)).
-inline std::string damage(const ServiceHeader& h, std::size_t size) {
-  if (h.max_clients > kMaxServiceClients)
-    return std::to_string(h.max_clients) + " client slots, more than " + std::to_string(kMaxServiceClients);
-  if (h.calls_per_client > kMaxCells || h.max_clients * h.calls_per_client != h.cell_count || h.cell_count > kMaxCells)
-    return std::to_string(h.cell_count) + " cells for " + std::to_string(h.max_clients) + " clients of " +
-           std::to_string(h.calls_per_client) + " calls (at most " + std::to_string(kMaxCells) + ")";
+// What is wrong with geometry `g`, read from header `h`, against the
+// `size`-byte segment `h` heads; empty when nothing is (as for a topic's:
+// see damage(TopicHeader, TopicGeometry)).
+inline std::string damage(const ServiceHeader& h, const ServiceGeometry& g, std::size_t size) {
+  if (g.max_clients > kMaxServiceClients)
+    return std::to_string(g.max_clients) + " client slots, more than " + std::to_string(kMaxServiceClients);
+  if (g.calls_per_client > kMaxCells || g.cell_count() > kMaxCells || h.cell_count != g.cell_count())
+    return std::to_string(h.cell_count) + " cells for " + std::to_string(g.max_clients) + " clients of " +
+           std::to_string(g.calls_per_client) + " calls (at most " + std::to_string(kMaxCells) + ")";
   constexpr std::uint64_t kBound = 1ull << 40;  // before the geometry adds them: no size wraps around
-  if (h.max_request_size >= kBound || h.max_reply_size >= kBound)
-    return "requests of " + std::to_string(h.max_request_size) + " bytes, replies of " + std::to_string(h.max_reply_size);
-  const ServiceGeometry g{h.max_request_size, h.max_reply_size, h.cell_count};
+  if (g.max_request_size >= kBound || g.max_reply_size >= kBound)
+    return "requests of " + std::to_string(g.max_request_size) + " bytes, replies of " + std::to_string(g.max_reply_size);
   if (h.cell_stride != g.cell_stride() || h.request_offset != g.request_offset() || h.reply_offset != g.reply_offset() ||
       h.tail_offset != g.tail_offset() || h.cells_offset != g.cells_offset())
     return "a layout that does not follow from its message sizes and cells";

@@ -41,7 +41,7 @@ inline RegistrySnapshot snapshot(const std::shared_ptr<Registry>& registry) {
       t.publisher_pid = registry->pid_of(publisher);
       t.publisher = registry->name_of(publisher);
     }
-    for (std::size_t i = 0; i < h.max_subscribers; ++i)
+    for (std::size_t i = 0; i < topic->geometry().max_subscribers; ++i)
       if (const auto owner = h.subscribers[i].owner.load(); registry->alive(owner))
         t.subscriber_pids.push_back(registry->pid_of(owner));
     s.topics.push_back(std::move(t));
@@ -57,7 +57,7 @@ inline RegistrySnapshot snapshot(const std::shared_ptr<Registry>& registry) {
       v.server_pid = registry->pid_of(server);
       v.server = registry->name_of(server);
     }
-    for (std::size_t c = 0; c < h.max_clients; ++c)
+    for (std::size_t c = 0; c < service->geometry().max_clients; ++c)
       if (const auto owner = h.clients[c].owner.load(); registry->alive(owner))
         v.client_pids.push_back(registry->pid_of(owner));
     s.services.push_back(std::move(v));

@@ -107,9 +107,9 @@ class Subscriber {
   }
 
   Subscriber(std::shared_ptr<Topic> topic, std::size_t history, bool observer)
-      : views_{std::make_unique<std::atomic<std::uint32_t>[]>(topic->header().chunk_count)},
+      : views_{std::make_unique<std::atomic<std::uint32_t>[]>(topic->geometry().chunk_count())},
         cursor_{std::move(topic), history, observer, views_.get()},
-        max_held_{observer ? 1 : cursor_.topic()->header().max_held} {}
+        max_held_{observer ? 1 : cursor_.topic()->geometry().max_held} {}
   ~Subscriber() = default;
 
   void end_share(std::uint64_t share) noexcept {

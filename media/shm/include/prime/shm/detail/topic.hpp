@@ -1,5 +1,6 @@
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <bit>
 #include <chrono>
@@ -30,6 +31,17 @@ struct Places {
   std::uint64_t capacity;
   std::uint64_t mask;    // capacity - 1 where that is a power of two, else 0
   std::uint64_t stride;  // from one chunk to the next
+  std::uint64_t chunk_count;
+  std::uint64_t max_size;  // of a payload
+
+  // Whether ring entry `entry` names one of the topic's chunks. One naming
+  // a chunk past them (written by a foreign or broken program) is taken for
+  // an entry overwritten: its sample is lost, not read out of the segment.
+  [[nodiscard]] bool names_chunk(std::uint64_t entry) const noexcept { return RingEntry::chunk(entry) < chunk_count; }
+  // A sample's size as shared memory records it, within its payload's room.
+  [[nodiscard]] std::size_t size(std::uint64_t recorded) const noexcept {
+    return static_cast<std::size_t>(std::min(recorded, max_size));
+  }
 
   // Where `seq` lands in the ring: a mask where the capacity is a power of
   // two (a division costs more than the rest of a poll), else the remainder.
@@ -79,14 +91,17 @@ class Topic {
     if (!segment || segment->size() < sizeof(TopicHeader)) return nullptr;
     const auto* header = std::launder(reinterpret_cast<const TopicHeader*>(segment->data()));
     if (header->magic.load(std::memory_order_acquire) != kTopicMagic || header->layout != kLayoutVersion) return nullptr;
-    refuse_damaged(name, *header, segment->size());
     return std::shared_ptr<Topic>{new Topic{std::move(registry), name, std::move(*segment)}};
   }
 
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
   [[nodiscard]] const Segment& segment() const noexcept { return segment_; }
   [[nodiscard]] Registry& registry() const noexcept { return *registry_; }
+  // Its shared state. What it fixed at creation is read through geometry()
+  // and overflow(), never here: see TopicGeometry.
   [[nodiscard]] TopicHeader& header() const noexcept { return *header_; }
+  [[nodiscard]] const TopicGeometry& geometry() const noexcept { return geometry_; }
+  [[nodiscard]] Overflow overflow() const noexcept { return overflow_; }
   [[nodiscard]] const Places& places() const noexcept { return places_; }
   [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept { return places_.ring(seq); }
   [[nodiscard]] std::uint64_t ring_index(std::uint64_t seq) const noexcept { return places_.ring_index(seq); }
@@ -95,14 +110,14 @@ class Topic {
   [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept { return places_.payload(i); }
   [[nodiscard]] TopicQos qos() const noexcept {
     const auto& h = *header_;
-    return {.capacity = h.capacity,
-            .max_message_size = h.max_message_size,
-            .overflow = static_cast<Overflow>(h.overflow),
+    return {.capacity = geometry_.capacity,
+            .max_message_size = geometry_.max_message_size,
+            .overflow = overflow_,
             .block_timeout = std::chrono::duration_cast<std::chrono::milliseconds>(
                 std::chrono::nanoseconds{h.block_timeout_ns.load(std::memory_order_relaxed)}),
             .publish_fence = h.light_publisher.load(std::memory_order_relaxed) != 0 ? PublishFence::light : PublishFence::full,
-            .max_subscribers = h.max_subscribers,
-            .max_held = h.max_held};
+            .max_subscribers = geometry_.max_subscribers,
+            .max_held = geometry_.max_held};
   }
 
   // Clears what the dead owner of subscriber slot `i` held. Safe to race:
@@ -125,7 +140,7 @@ class Topic {
 
   void release_subscriber_holds(std::size_t i) const {
     const auto bit = 1ull << i;
-    for (std::uint32_t c = 0; c < header_->chunk_count; ++c) chunk(c).holders.fetch_and(~bit);
+    for (std::uint32_t c = 0; c < geometry_.chunk_count(); ++c) chunk(c).holders.fetch_and(~bit);
   }
 
   // Reclaims every subscriber slot whose participant is gone; returns how many.
@@ -148,17 +163,22 @@ class Topic {
   }
 
  private:
+  // Throws Failure (Errc::type_mismatch) when the header is damaged.
   Topic(std::shared_ptr<Registry> registry, std::string name, Segment segment)
       : registry_{std::move(registry)},
         name_{std::move(name)},
         segment_{std::move(segment)},
         header_{std::launder(reinterpret_cast<TopicHeader*>(segment_.data()))},
-        places_{.rings = reinterpret_cast<std::atomic<std::uint64_t>*>(segment_.data() + header_->ring_offset),
-                .infos = std::launder(reinterpret_cast<SampleInfo*>(segment_.data() + header_->info_offset)),
-                .chunks = segment_.data() + header_->chunks_offset,
-                .capacity = header_->capacity,
-                .mask = std::has_single_bit(header_->capacity) ? header_->capacity - 1 : 0,
-                .stride = header_->chunk_stride} {}
+        geometry_{checked_geometry(name_, *header_, segment_.size())},
+        overflow_{static_cast<Overflow>(header_->overflow) == Overflow::block ? Overflow::block : Overflow::drop_oldest},
+        places_{.rings = reinterpret_cast<std::atomic<std::uint64_t>*>(segment_.data() + geometry_.ring_offset()),
+                .infos = std::launder(reinterpret_cast<SampleInfo*>(segment_.data() + geometry_.info_offset())),
+                .chunks = segment_.data() + geometry_.chunks_offset(),
+                .capacity = geometry_.capacity,
+                .mask = std::has_single_bit(geometry_.capacity) ? geometry_.capacity - 1 : 0,
+                .stride = geometry_.chunk_stride(),
+                .chunk_count = geometry_.chunk_count(),
+                .max_size = geometry_.max_message_size} {}
 
   static bool is_set_up(const std::string& name, std::byte* data, std::size_t size) {
     if (size < sizeof(TopicHeader)) return false;
@@ -169,12 +189,14 @@ class Topic {
       throw Failure{{Errc::type_mismatch, "topic '" + name + "': made by another version of Prime (layout " +
                                               std::to_string(header->layout) + ", this one reads " +
                                               std::to_string(kLayoutVersion) + ")"}};
-    refuse_damaged(name, *header, size);
-    return true;
+    return true;  // its geometry is checked when it is mapped (checked_geometry)
   }
-  static void refuse_damaged(const std::string& name, const TopicHeader& header, std::size_t size) {
-    if (const auto what = damage(header, size); !what.empty())
+  // The geometry `header` records, read once and checked against the segment.
+  static TopicGeometry checked_geometry(const std::string& name, const TopicHeader& header, std::size_t size) {
+    const auto geometry = TopicGeometry::of(header);
+    if (const auto what = damage(header, geometry, size); !what.empty())
       throw Failure{{Errc::type_mismatch, "topic '" + name + "': its shared memory is damaged (" + what + ")"}};
+    return geometry;
   }
 
   static void set_up(std::byte* data, const Fingerprint& type, const TopicQos& qos, const TopicGeometry& geometry,
@@ -211,6 +233,8 @@ class Topic {
   std::string name_;
   Segment segment_;
   TopicHeader* header_;
+  TopicGeometry geometry_;  // read once from the header, and checked
+  Overflow overflow_;
   Places places_;
 };
 

@@ -42,6 +42,7 @@ class Writer {
         report_{std::move(report)},
         light_{light && light_fences()} {
     auto& h = topic_->header();
+    const auto& g = topic_->geometry();
     auto current = h.publisher.load();
     while (true) {
       if (current != 0 && topic_->registry().alive(current))
@@ -55,9 +56,12 @@ class Writer {
     // and reads this clear is seen by every later look for sleepers.
     h.light_publisher.store(light_ ? 1 : 0, std::memory_order_seq_cst);
     next_ = h.head.load();
-    in_ring_.resize(h.capacity);
-    batch_leaving_.resize(h.capacity + kLeavingMax);
-    for (std::uint64_t i = 0; i < h.capacity; ++i) in_ring_[i] = RingEntry::chunk(topic_->ring(i).load());
+    in_ring_.resize(g.capacity);
+    batch_leaving_.resize(g.capacity + kLeavingMax);
+    for (std::uint64_t i = 0; i < g.capacity; ++i) {
+      const auto entry = topic_->ring(i).load();
+      in_ring_[i] = topic_->places().names_chunk(entry) ? RingEntry::chunk(entry) : kNoChunk;
+    }
   }
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
@@ -80,11 +84,11 @@ class Writer {
   // takes nothing for `block_timeout` is reported once and passed over from
   // then on, like a drop_oldest reader, until it catches up.
   std::expected<std::uint32_t, Error> loan() {
-    auto& h = topic_->header();
-    const bool block = static_cast<Overflow>(h.overflow) == Overflow::block;
-    if (block && out_ >= h.capacity)
+    const auto& g = topic_->geometry();
+    const bool block = topic_->overflow() == Overflow::block;
+    if (block && out_ >= g.capacity)
       return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() + "': all " +
-                                                             std::to_string(h.capacity) +
+                                                             std::to_string(g.capacity) +
                                                              " places of its ring are loaned out; publish or drop a "
                                                              "loan before taking another"});
     if (block) wait_for_room();
@@ -105,9 +109,9 @@ class Writer {
                                                              " loaned out and the ring and subscribers hold the rest; "
                                                              "publish or drop a loan before taking another"});
     return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() + "': all " +
-                                                           std::to_string(h.chunk_count) +
+                                                           std::to_string(g.chunk_count()) +
                                                            " chunks are in use; a subscriber holds more than max_held (" +
-                                                           std::to_string(h.max_held) + ")"});
+                                                           std::to_string(g.max_held) + ")"});
   }
 
   // Up to `max` chunks at once, appended to `out`: the first as loan()
@@ -119,13 +123,13 @@ class Writer {
     auto first = loan();
     if (!first) return std::unexpected(std::move(first.error()));
     out.push_back(*first);
-    auto& h = topic_->header();
-    const bool block = static_cast<Overflow>(h.overflow) == Overflow::block;
+    const auto& g = topic_->geometry();
+    const bool block = topic_->overflow() == Overflow::block;
     auto room = [&]() -> std::uint64_t {  // more loans the ring has places for now (see wait_for_room)
-      const auto places = h.capacity > out_ ? h.capacity - out_ : 0;  // out_ passes it only under drop_oldest
+      const auto places = g.capacity > out_ ? g.capacity - out_ : 0;  // out_ passes it only under drop_oldest
       if (!block) return places;
       const auto after = next_ + out_;
-      return std::min(places, min_cursor_ + h.capacity > after ? min_cursor_ + h.capacity - after : 0);
+      return std::min(places, min_cursor_ + g.capacity > after ? min_cursor_ + g.capacity - after : 0);
     };
     auto more = std::min<std::uint64_t>(max - 1, room());
     if (more < max - 1 && block) {
@@ -371,14 +375,14 @@ class Writer {
   std::optional<std::uint32_t> claim() noexcept {
     if (spare_.size() == 0) evict_leaving();
     if (auto chunk = spare_.pop()) return chunk;
-    return claim_free(topic_->header().chunk_count);
+    return claim_free(topic_->geometry().chunk_count());
   }
 
   // A free chunk among the next `tries` of the search, now held by this
   // publisher, if there is one. A held chunk is passed over on a plain load,
   // without taking its line from the subscriber that holds it.
   std::optional<std::uint32_t> claim_free(std::uint64_t tries) noexcept {
-    const auto count = topic_->header().chunk_count;
+    const auto count = topic_->geometry().chunk_count();
     for (std::uint64_t tried = 0; tried < std::min(tries, count); ++tried) {
       const auto i = static_cast<std::uint32_t>(search_++ % count);
       auto& holders = topic_->chunk(i).holders;
@@ -407,16 +411,17 @@ class Writer {
   // loans out already (out_ < capacity), as sequence next_ + out_.
   void wait_for_room() {
     auto& h = topic_->header();
+    const auto& g = topic_->geometry();
     const auto after = next_ + out_;
-    if (after < h.capacity) return;
-    const auto needed = after + 1 - h.capacity;  // every waited-for subscriber must have taken this
+    if (after < g.capacity) return;
+    const auto needed = after + 1 - g.capacity;  // every waited-for subscriber must have taken this
     if (min_cursor_ >= needed) return;
     // Capped at next_: a subscriber joining from now on starts at or after it.
     auto room = [&] { return (min_cursor_ = std::min(slowest(), next_)) >= needed; };
     // Asleep, wait for half a ring of room, not one slot: then the publisher
     // and a subscriber that keeps up take turns by the half ring, not by the
     // sample, and wake each other rarely.
-    const auto wanted = std::min(needed + h.capacity / 2, next_);
+    const auto wanted = std::min(needed + g.capacity / 2, next_);
     auto plenty = [&] { return (min_cursor_ = std::min(slowest(), next_)) >= wanted; };
     auto next_check = Clock::now();
     auto sleep = [&](Clock::time_point until) {
@@ -445,9 +450,10 @@ class Writer {
   // overwritten on the strength of a look that missed it.
   std::uint64_t slowest() const {
     auto& h = topic_->header();
+    const auto& g = topic_->geometry();
     std::atomic_thread_fence(std::memory_order_seq_cst);
     auto min = ~0ull;
-    for (std::size_t i = 0; i < h.max_subscribers; ++i) {
+    for (std::size_t i = 0; i < g.max_subscribers; ++i) {
       const auto& slot = h.subscribers[i];
       const auto cursor = slot.cursor.load(std::memory_order_acquire);
       if (cursor < min && slot.lagging.load(std::memory_order_relaxed) == kWaitedFor) min = cursor;
@@ -467,14 +473,15 @@ class Writer {
   // kPassedOver, when the subscriber lets go of those it does not need.
   void give_up_on_laggards(std::uint64_t needed) {
     auto& h = topic_->header();
-    for (std::size_t i = 0; i < h.max_subscribers; ++i) {
+    const auto& g = topic_->geometry();
+    for (std::size_t i = 0; i < g.max_subscribers; ++i) {
       auto& slot = h.subscribers[i];
       if (slot.cursor.load() >= needed || slot.lagging.load() != kWaitedFor) continue;
       slot.lagging.store(kPinning, std::memory_order_seq_cst);
       const auto from = slot.cursor.load(std::memory_order_seq_cst);
       const auto to = slot.kept_end.load(std::memory_order_seq_cst);
       if (from != kNoCursor)
-        for (auto seq = std::max(from, next_ > h.capacity ? next_ - h.capacity : 0); seq < std::min(to, next_); ++seq)
+        for (auto seq = std::max(from, next_ > g.capacity ? next_ - g.capacity : 0); seq < std::min(to, next_); ++seq)
           if (const auto chunk = in_ring_[topic_->ring_index(seq)]; chunk != kNoChunk)
             topic_->chunk(chunk).holders.fetch_or(1ull << i, std::memory_order_seq_cst);
       slot.lagging.store(kPassedOver, std::memory_order_seq_cst);
@@ -493,15 +500,16 @@ class Writer {
   // topic goes on after the last sequence that reached the ring.
   void recover() {
     auto& h = topic_->header();
-    std::vector<bool> in_ring(h.chunk_count, false);
+    const auto& g = topic_->geometry();
+    std::vector<bool> in_ring(g.chunk_count(), false);
     auto last = h.head.load();
-    for (std::uint64_t i = 0; i < h.capacity; ++i) {
+    for (std::uint64_t i = 0; i < g.capacity; ++i) {
       const auto c = RingEntry::chunk(topic_->ring(i).load());
-      if (c >= h.chunk_count) continue;
+      if (c >= g.chunk_count()) continue;
       in_ring[c] = true;
       if (const auto seq = topic_->chunk(c).seq.load(); seq != kNotPublished) last = std::max(last, seq + 1);
     }
-    for (std::uint32_t c = 0; c < h.chunk_count; ++c) {
+    for (std::uint32_t c = 0; c < g.chunk_count(); ++c) {
       auto& chunk = topic_->chunk(c);
       if (in_ring[c]) {
         chunk.holders.fetch_or(kRingBit);
