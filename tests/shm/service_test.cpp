@@ -242,10 +242,20 @@ TEST_F(ServiceTest, AnAnswerAfterItsCallTimedOutNeverReachesALaterCall) {
 // out of the segment, and calls go on.
 TEST_F(ServiceTest, AServiceHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheSegment) {
   core.serve("planner", plan, {.max_clients = 2});
+  core.serve("twice", [](std::span<const std::byte> b) {
+    std::vector<std::byte> out(b.begin(), b.end());
+    out.insert(out.end(), b.begin(), b.end());
+    return out;
+  }, {.max_request_size = 100, .max_reply_size = 100});
   auto planner = core.chain<Pose, Path>("planner");
-  ASSERT_EQ(planner(Pose{1, 2}).steps, 3u);
-  {
-    const MappedService mapped{core.domain(), "planner"};
+  auto second = core.chain<Pose, Path>("planner");
+  auto twice = core.chain<shm::Bytes, shm::Bytes>("twice");
+  ASSERT_EQ(planner(Pose{1, 2}).steps, 3u);  // client slot 0
+  ASSERT_EQ(second(Pose{2, 2}).steps, 4u);   // client slot 1
+  const std::vector<std::byte> ten(10, std::byte{1}), sixty(60, std::byte{2});
+  ASSERT_EQ(twice(ten).size(), 20u);
+  for (const auto* name : {"planner", "twice"}) {
+    const MappedService mapped{core.domain(), name};
     auto& h = mapped.header();
     constexpr std::uint64_t kFar = 1ull << 40;
     h.cell_stride = h.request_offset = h.reply_offset = h.tail_offset = h.cells_offset = kFar;
@@ -253,11 +263,23 @@ TEST_F(ServiceTest, AServiceHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheS
     h.max_clients = h.calls_per_client = h.cell_count = 1000;
   }
   for (int i = 0; i < 20; ++i) {
-    const auto path = planner.call(Pose{static_cast<double>(i), 1});
-    ASSERT_TRUE(path) << path.error().describe();
-    EXPECT_EQ(path->steps, static_cast<std::uint32_t>(i + 1));
-    EXPECT_EQ(path->length, 2.0 * i);
+    for (auto* client : {&planner, &second}) {
+      const auto path = client->call(Pose{static_cast<double>(i), 1});
+      ASSERT_TRUE(path) << path.error().describe();
+      EXPECT_EQ(path->steps, static_cast<std::uint32_t>(i + 1));
+      EXPECT_EQ(path->length, 2.0 * i);
+    }
+    ASSERT_EQ(twice(ten).size(), 20u);
   }
+  const auto too_big = twice.call(std::vector<std::byte>(101, std::byte{3}));
+  ASSERT_FALSE(too_big) << "101 bytes do not fit the service's requests as it was made";
+  EXPECT_NE(too_big.error().message.find("a request of 101 bytes exceeds max_request_size (100 bytes)"), std::string::npos)
+      << too_big.error().describe();
+  const auto too_long = twice.call(sixty);
+  ASSERT_FALSE(too_long) << "120 bytes do not fit the service's replies as it was made";
+  EXPECT_NE(too_long.error().message.find("a reply of 120 bytes exceeds max_reply_size (100 bytes)"), std::string::npos)
+      << too_long.error().describe();
+
   // A participant that maps it afresh finds the damage, and says so.
   shm::Core other{core.domain(), {.participant = "client"}};
   const auto refused = other.chain<Pose, Path>("planner").call(Pose{1, 1});

@@ -391,6 +391,9 @@ TEST_F(ShmTest, AHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheSegment) {
     h.max_held = 1ull << 30;
     h.overflow = 7;
   }
+  // Each round's samples stay held while the next is published: the chunks
+  // the ring lets go of are then not free, and the publisher searches for others.
+  std::vector<shm::View<int>> held;
   auto publish_and_read = [&](int first, auto&... readers) {
     for (int i = first; i < first + 4; ++i) ASSERT_TRUE(publisher->publish(i));
     auto batch = publisher->loan_some(4);
@@ -398,11 +401,13 @@ TEST_F(ShmTest, AHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheSegment) {
     ASSERT_EQ(batch->size(), 4u);
     for (std::size_t k = 0; k < 4; ++k) (*batch)[k] = first + 4 + static_cast<int>(k);
     std::move(*batch).publish();
+    held.clear();
     auto each = [&](auto& one) {
       for (int i = first; i < first + 8; ++i) {
         auto sample = one.try_read();
         ASSERT_TRUE(sample) << "value " << i;
         EXPECT_EQ(*sample->value, i);
+        held.push_back(std::move(sample->value));
       }
     };
     (each(readers), ...);
@@ -413,18 +418,32 @@ TEST_F(ShmTest, AHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheSegment) {
     }
     EXPECT_TRUE(batches.try_read(8).empty());  // and the publisher learns the batch is done with
   };
-  for (int round = 0; round < 3; ++round) publish_and_read(round * 8, reader);
+  // Enough rounds for the publisher's search for free chunks to pass every chunk.
+  for (int round = 0; round < 40; ++round) publish_and_read(round * 8, reader);
   const auto joining = core.subscribe<int>("checked", {}, qos);
   EXPECT_EQ(joining.topic_qos().capacity, 8u) << "the topic as it was made";
   EXPECT_EQ(joining.topic_qos().overflow, Overflow::block);
   auto joined = joining.subscribe();
-  publish_and_read(24, reader, joined);
+  publish_and_read(320, reader, joined);
+  held.clear();
   publisher.reset();
   publisher.emplace(core.publisher<int>("checked", qos));
-  publish_and_read(32, reader, joined);
-  auto refused = publisher->loan_some(9);  // the ring's 8 places, under block
-  ASSERT_TRUE(refused);
-  EXPECT_EQ(refused->size(), 8u) << "block, with the ring's capacity of 8";
+  publish_and_read(328, reader, joined);
+  {
+    auto some = publisher->loan_some(9);
+    ASSERT_TRUE(some);
+    EXPECT_EQ(some->size(), 8u) << "the ring's 8 places, under block";
+  }
+  std::vector<shm::Loan<int>> loans;
+  for (int i = 0; i < 8; ++i) {
+    auto loan = publisher->loan();
+    ASSERT_TRUE(loan) << loan.error().describe();
+    loans.push_back(std::move(*loan));
+  }
+  auto ninth = publisher->loan();
+  ASSERT_FALSE(ninth);
+  EXPECT_NE(ninth.error().message.find("all 8 places of its ring are loaned out"), std::string::npos)
+      << ninth.error().describe();
 }
 
 // A ring entry naming a chunk the topic does not have, or a size larger
@@ -441,7 +460,7 @@ TEST_F(ShmTest, ASampleDamagedInSharedMemoryIsLostOrCutNotReadOutOfTheSegment) {
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(publisher.publish(std::span<const std::byte>{ten}));
   const MappedTopic mapped{core.domain(), "raw"};
   const auto entry = mapped.ring(1).load();
-  mapped.ring(1).store(shm::detail::RingEntry::pack(1, static_cast<std::uint32_t>(mapped.header().chunk_count + 5)));
+  mapped.ring(1).store(shm::detail::RingEntry::pack(1, shm::detail::kNoChunk - 1));  // 2 GiB past the chunks
   mapped.chunk(shm::detail::RingEntry::chunk(mapped.ring(2).load())).size = 1ull << 40;
   mapped.info(2).size.store(1ull << 40);
   mapped.header().max_message_size = 1ull << 40;
