@@ -489,6 +489,22 @@ TEST_F(ShmTest, ASampleDamagedInSharedMemoryIsLostOrCutNotReadOutOfTheSegment) {
   mapped.ring(1).store(entry);
 }
 
+// Text in a topic's header (its type's name and description) that a
+// foreign or broken program left without its end is read up to its room,
+// not past it.
+TEST_F(ShmTest, TextInSharedMemoryWithoutItsEndIsReadToItsRoomNotPast) {
+  auto publisher = core.publisher<int>("texts");
+  const MappedTopic mapped{core.domain(), "texts"};
+  auto& h = mapped.header();
+  std::memset(h.schema, 'x', sizeof h.schema);
+  std::memset(h.type.name, 'y', sizeof h.type.name);
+  const auto seen = shm::inspect(core.domain());
+  ASSERT_TRUE(seen);
+  ASSERT_EQ(seen->topics.size(), 1u);
+  EXPECT_EQ(seen->topics[0].schema, std::string(shm::detail::kSchemaCapacity, 'x'));
+  EXPECT_EQ(seen->topics[0].type, std::string(Fingerprint::kNameCapacity, 'y') + " (4 bytes, align 4, layout 1)");
+}
+
 TEST_F(ShmTest, OtherQosIsRefusedWhicheverSideOpensTheTopicFirst) {
   const shm::TopicQos sixteen{.capacity = 16}, thirty_two{.capacity = 32};
   {

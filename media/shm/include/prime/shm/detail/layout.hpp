@@ -166,6 +166,13 @@ static_assert(offsetof(TopicHeader, publisher) % 64 == 0 && offsetof(TopicHeader
 
 inline constexpr std::size_t round_up(std::size_t n, std::size_t to) { return (n + to - 1) / to * to; }
 
+// Text that shared memory holds in `from`: up to its first NUL, and never
+// past its end (a foreign or broken program may have left none).
+template <std::size_t N>
+std::string read_text(const char (&from)[N]) {
+  return {from, ::strnlen(from, N)};
+}
+
 // Copies a type's description where it fits; one that does not is recorded
 // as its size only (tools then show bytes).
 template <std::size_t N>

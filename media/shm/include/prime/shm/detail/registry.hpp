@@ -112,7 +112,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
     if (id == 0 || id == kReclaiming || slot >= kMaxParticipants) return "no participant";
     const auto& p = layout().participants[slot];
     if (p.id.load() != id) return "a participant that left";
-    std::string text = "participant '" + std::string{p.name} + "' (pid " + std::to_string(p.pid);
+    std::string text = "participant '" + read_text(p.name) + "' (pid " + std::to_string(p.pid);
     if (p.pid_namespace != pid_namespace_) text += " in another pid namespace";
     return text + ")";
   }
@@ -126,7 +126,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
     const auto slot = slot_of(id);
     if (slot >= kMaxParticipants) return {};
     const auto& p = layout().participants[slot];
-    return p.id.load() == id ? std::string{p.name} : std::string{};
+    return p.id.load() == id ? read_text(p.name) : std::string{};
   }
 
   // Lists `name` among the domain's topics or services; returns its entry's
@@ -141,7 +141,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
     std::size_t free = kMaxEndpoints;
     for (std::size_t i = 0; i < kMaxEndpoints; ++i) {
       auto& e = r.endpoints[i];
-      if (e.used && e.kind == kind && name == e.name) return i;
+      if (e.used && e.kind == kind && name == read_text(e.name)) return i;
       if (!e.used && free == kMaxEndpoints) free = i;
     }
     if (free == kMaxEndpoints)
@@ -159,7 +159,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
     Locked lock{*this};
     std::vector<std::string> names;
     for (auto& e : layout().endpoints)
-      if (e.used && e.kind == kind) names.emplace_back(e.name);
+      if (e.used && e.kind == kind) names.emplace_back(read_text(e.name));
     return names;
   }
   [[nodiscard]] std::vector<std::string> topics() { return names(EndpointKind::topic); }
@@ -170,7 +170,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
     Locked lock{*this};
     const auto& e = layout().endpoints[index];
     if (!e.used || e.kind != kind) return std::nullopt;
-    return std::string{e.name};
+    return read_text(e.name);
   }
 
   // The participants, as the table lists them now.
@@ -179,7 +179,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
     std::vector<RegistrySnapshot::Participant> list;
     for (auto& p : layout().participants) {
       const auto id = p.id.load();
-      if (id != 0) list.push_back({p.name, p.pid, p.pid_namespace, alive(id)});
+      if (id != 0) list.push_back({read_text(p.name), p.pid, p.pid_namespace, alive(id)});
     }
     return list;
   }
@@ -193,7 +193,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
       return {};
     std::vector<std::string> removed;
     for (auto& e : r.endpoints)
-      if (e.used) removed.push_back(segment_name(domain_, kind_name(e.kind), e.name));
+      if (e.used) removed.push_back(segment_name(domain_, kind_name(e.kind), read_text(e.name)));
     for (auto& e : r.endpoints) forget(e);
     r.magic.store(0);
     removed.push_back(segment_.name());
@@ -308,7 +308,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
 
   void forget(RegistryLayout::Endpoint& e) {
     if (!e.used) return;
-    Segment::remove(segment_name(domain_, kind_name(e.kind), e.name));
+    Segment::remove(segment_name(domain_, kind_name(e.kind), read_text(e.name)));
     e.used = 0;
     e.name[0] = '\0';
   }

@@ -3,7 +3,6 @@
 #include <sys/stat.h>
 
 #include <algorithm>
-#include <cstring>
 
 #include <atomic>
 #include <bit>
@@ -101,11 +100,8 @@ class Service {
   [[nodiscard]] std::size_t reply_size(const CellHeader& c) const noexcept {
     return static_cast<std::size_t>(std::min<std::uint64_t>(c.reply_size, geometry_.max_reply_size));
   }
-  // The error a failed call's cell carries, within its room.
-  [[nodiscard]] std::string error(std::size_t i) const {
-    const auto& text = tail(i).error;
-    return {text, ::strnlen(text, kErrorCapacity)};
-  }
+  // The error a failed call's cell carries.
+  [[nodiscard]] std::string error(std::size_t i) const { return read_text(tail(i).error); }
   // Whether the name still leads to this segment (a server that came back
   // for other types made a new one).
   [[nodiscard]] bool current() const { return segment_.linked(); }
