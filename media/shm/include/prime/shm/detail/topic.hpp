@@ -170,7 +170,8 @@ class Topic {
         segment_{std::move(segment)},
         header_{std::launder(reinterpret_cast<TopicHeader*>(segment_.data()))},
         geometry_{checked_geometry(name_, *header_, segment_.size())},
-        overflow_{static_cast<Overflow>(header_->overflow) == Overflow::block ? Overflow::block : Overflow::drop_oldest},
+        // Read once more after the check: whatever it reads now, one of the two.
+        overflow_{header_->overflow == static_cast<std::uint32_t>(Overflow::block) ? Overflow::block : Overflow::drop_oldest},
         places_{.rings = reinterpret_cast<std::atomic<std::uint64_t>*>(segment_.data() + geometry_.ring_offset()),
                 .infos = std::launder(reinterpret_cast<SampleInfo*>(segment_.data() + geometry_.info_offset())),
                 .chunks = segment_.data() + geometry_.chunks_offset(),
