@@ -1,5 +1,6 @@
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -66,7 +67,8 @@ struct Fingerprint {
 
   // "Scan (24 bytes, align 8, layout 1)"
   [[nodiscard]] std::string describe() const {
-    return std::string{name} + " (" + std::to_string(size) + " bytes, align " + std::to_string(alignment) +
+    // Up to its first NUL, never past its end: it may come from shared memory.
+    return std::string{name, std::find(name, name + kNameCapacity, '\0')} + " (" + std::to_string(size) + " bytes, align " + std::to_string(alignment) +
            ", layout " + std::to_string(layout_version) + ")";
   }
 };

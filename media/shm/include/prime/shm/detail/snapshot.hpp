@@ -36,7 +36,7 @@ inline RegistrySnapshot snapshot(const std::shared_ptr<Registry>& registry) {
     auto topic = inspect_or_skip(registry, name);
     if (!topic) continue;
     auto& h = topic->header();
-    RegistrySnapshot::Topic t{name, h.type.describe(), topic->qos(), 0, {}, {}, h.head.load(), h.schema};
+    RegistrySnapshot::Topic t{name, h.type.describe(), topic->qos(), 0, {}, {}, h.head.load(), read_text(h.schema)};
     if (const auto publisher = h.publisher.load(); registry->alive(publisher)) {
       t.publisher_pid = registry->pid_of(publisher);
       t.publisher = registry->name_of(publisher);
@@ -52,7 +52,8 @@ inline RegistrySnapshot snapshot(const std::shared_ptr<Registry>& registry) {
     auto& h = service->header();
     RegistrySnapshot::Service v{name, h.request_type.describe(), h.reply_type.describe(), service->qos(), 0, {}, {},
                                 h.served.load(), h.failed.load(), h.requests_in.load(), h.forwarded_in.load(),
-                                h.replies_out.load(), h.forwarded_out.load(), h.request_schema, h.reply_schema};
+                                h.replies_out.load(), h.forwarded_out.load(), read_text(h.request_schema),
+                                read_text(h.reply_schema)};
     if (const auto server = h.server.load(); registry->alive(server)) {
       v.server_pid = registry->pid_of(server);
       v.server = registry->name_of(server);
