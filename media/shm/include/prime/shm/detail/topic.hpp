@@ -140,7 +140,7 @@ class Topic {
 
   void release_subscriber_holds(std::size_t i) const {
     const auto bit = 1ull << i;
-    for (std::uint32_t c = 0; c < geometry_.chunk_count(); ++c) chunk(c).holders.fetch_and(~bit);
+    for (std::uint32_t c = 0; c < places_.chunk_count; ++c) chunk(c).holders.fetch_and(~bit);
   }
 
   // Reclaims every subscriber slot whose participant is gone; returns how many.

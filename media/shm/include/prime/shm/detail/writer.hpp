@@ -375,14 +375,14 @@ class Writer {
   std::optional<std::uint32_t> claim() noexcept {
     if (spare_.size() == 0) evict_leaving();
     if (auto chunk = spare_.pop()) return chunk;
-    return claim_free(topic_->geometry().chunk_count());
+    return claim_free(topic_->places().chunk_count);
   }
 
   // A free chunk among the next `tries` of the search, now held by this
   // publisher, if there is one. A held chunk is passed over on a plain load,
   // without taking its line from the subscriber that holds it.
   std::optional<std::uint32_t> claim_free(std::uint64_t tries) noexcept {
-    const auto count = topic_->geometry().chunk_count();
+    const auto count = topic_->places().chunk_count;
     for (std::uint64_t tried = 0; tried < std::min(tries, count); ++tried) {
       const auto i = static_cast<std::uint32_t>(search_++ % count);
       auto& holders = topic_->chunk(i).holders;
