@@ -460,7 +460,8 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
   md << "## Throughput, lossless\n\n";
   image("throughput", "throughput against payload");
   md << "The floor is a plain single-producer/single-consumer ring of 64-byte slots in shared memory between the same "
-        "two processes.\n\n"
+        "two processes, each slot carrying its message's sequence (the consumer polls the slot it reads next) and the "
+        "consumer handing slots back 32 at a time.\n\n"
      << scenario_table(results, "throughput", "SpscFloor", true) << '\n'
      << "SpscFloor is 4096 slots deep: the machine's floor. "
         "SpscFloor256 is the same ring 256 slots deep, as deep as Shm's topics and the iceoryx, Fast DDS and POSIX "
