@@ -1,10 +1,11 @@
 #pragma once
 
-#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <string>
 #include <string_view>
+
+#include "prime/common/fixed_text.hpp"
 
 namespace prime {
 
@@ -67,9 +68,9 @@ struct Fingerprint {
 
   // "Scan (24 bytes, align 8, layout 1)"
   [[nodiscard]] std::string describe() const {
-    // Up to its first NUL, never past its end: it may come from shared memory.
-    return std::string{name, std::find(name, name + kNameCapacity, '\0')} + " (" + std::to_string(size) + " bytes, align " + std::to_string(alignment) +
-           ", layout " + std::to_string(layout_version) + ")";
+    // The name may come from shared memory: read within its room.
+    return read_text(name) + " (" + std::to_string(size) + " bytes, align " + std::to_string(alignment) + ", layout " +
+           std::to_string(layout_version) + ")";
   }
 };
 

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "prime/common/fingerprint.hpp"
+#include "prime/common/fixed_text.hpp"
 #include "prime/shm/detail/doorbell.hpp"
 
 namespace prime::shm::detail {
@@ -165,13 +166,6 @@ static_assert(offsetof(TopicHeader, publisher) % 64 == 0 && offsetof(TopicHeader
               "the lines publisher and subscribers write do not share with each other");
 
 inline constexpr std::size_t round_up(std::size_t n, std::size_t to) { return (n + to - 1) / to * to; }
-
-// Text that shared memory holds in `from`: up to its first NUL, and never
-// past its end (a foreign or broken program may have left none).
-template <std::size_t N>
-std::string read_text(const char (&from)[N]) {
-  return {from, ::strnlen(from, N)};
-}
 
 // Copies a type's description where it fits; one that does not is recorded
 // as its size only (tools then show bytes).
