@@ -307,7 +307,7 @@ TEST_F(ShmTest, RawByteTopicsCarryMessagesUpToTheirMaximum) {
 TEST_F(ShmTest, ATopicTakesTheMemoryItsQosSaysAllReservedAtCreation) {
   const shm::TopicQos qos{.capacity = 16, .max_message_size = 4096, .max_subscribers = 2, .max_held = 3};
   const auto expected = shm::topic_memory<shm::Bytes>(qos);
-  const std::size_t chunks = (16 + 2 * 3 + 2) * (64 + 4096);  // 24 chunks of header and payload
+  const std::size_t chunks = (16 + 2 * 3 + 2) * (128 + 4096);  // 24 chunks: a header's block and the payload
   EXPECT_GE(expected, chunks);
   EXPECT_LT(expected - chunks, 16384u) << "the rest is the topic's header, its ring and its infos, each from a page";
   auto publisher = core.publisher<shm::Bytes>("sized", qos);
@@ -316,8 +316,8 @@ TEST_F(ShmTest, ATopicTakesTheMemoryItsQosSaysAllReservedAtCreation) {
   EXPECT_EQ(static_cast<std::size_t>(st.st_size), expected);
   EXPECT_GE(static_cast<std::size_t>(st.st_blocks) * 512, expected) << "every byte is allocated, not only sized";
   const auto by_default = shm::topic_memory<std::uint64_t>({});
-  EXPECT_GE(by_default, (64u + 8 * 8 + 2) * 128);
-  EXPECT_LT(by_default, (64u + 8 * 8 + 2) * 128 + 16384)
+  EXPECT_GE(by_default, (64u + 8 * 8 + 2) * 256);  // a header's block and a payload's
+  EXPECT_LT(by_default, (64u + 8 * 8 + 2) * 256 + 16384)
       << "default QoS: about twice the ring's capacity in chunks, not nine times";
 }
 

@@ -54,7 +54,7 @@ struct Places {
   [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept {
     return *std::launder(reinterpret_cast<ChunkHeader*>(chunks + i * stride));
   }
-  [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept { return chunks + i * stride + sizeof(ChunkHeader); }
+  [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept { return chunks + i * stride + kPayloadOffset; }
 };
 
 // A topic's segment mapped into this process, shared by its publisher and
