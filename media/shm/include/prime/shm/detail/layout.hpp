@@ -59,7 +59,7 @@ inline constexpr std::size_t kPageAlignment = 4096;
 // not have the adjacent-line prefetcher, which fetches lines in 128-byte
 // pairs, pull in the header the publisher writes for each sample, and the
 // publisher finds the header's line still its own (measured on an AMD
-// EPYC, 64-byte messages: batches of views 1.15x, read_some batches 1.4x
+// EPYC, 64-byte messages: batches of views 1.1x, read_some batches 1.4x
 // faster than with header and payload sharing a block; latency and 1 MiB
 // unchanged). Chunks are whole blocks, so no payload shares one with the
 // next chunk's header either.
