@@ -7,7 +7,6 @@
 #include <string>
 
 #include "prime/common/fingerprint.hpp"
-#include "prime/common/fixed_text.hpp"
 #include "prime/shm/detail/doorbell.hpp"
 
 namespace prime::shm::detail {

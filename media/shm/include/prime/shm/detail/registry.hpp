@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "prime/common/fixed_text.hpp"
 #include "prime/logic/error.hpp"
 #include "prime/shm/detail/file_lock.hpp"
 #include "prime/shm/detail/layout.hpp"

@@ -13,6 +13,7 @@
 #include <string>
 
 #include "prime/common/fingerprint.hpp"
+#include "prime/common/fixed_text.hpp"
 #include "prime/logic/error.hpp"
 #include "prime/shm/detail/registry.hpp"
 #include "prime/shm/detail/segment.hpp"

@@ -4,6 +4,7 @@
 #include <memory>
 #include <string>
 
+#include "prime/common/fixed_text.hpp"
 #include "prime/shm/detail/registry.hpp"
 #include "prime/shm/detail/service.hpp"
 #include "prime/shm/detail/topic.hpp"
