@@ -1,17 +1,19 @@
-// How an in-process source hands one value to several readers: shared, and
-// copied only by a reader that takes it while another reader still holds it,
-// never by the publisher.
+// How an in-process source hands one value to several readers: shared, moved
+// to the last reader to take it and copied by the others, never by the
+// publisher.
 #include <gtest/gtest.h>
 
 #include <atomic>
 #include <chrono>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 #include <vector>
 
 #include "prime/topology/local_source.hpp"
+#include "support/threads.hpp"
 
 namespace prime::test {
 namespace {
@@ -21,6 +23,8 @@ using namespace std::chrono_literals;
 // A value that counts its copies and remembers which threads made them.
 struct Counted {
   static inline std::atomic<int> copies = 0;
+  static inline std::atomic<int> copies_begun = 0;
+  static inline std::atomic<bool> hold_copies = false;  // a copy waits, before it reads, while this is set
   static inline std::mutex mutex;
   static inline std::set<std::thread::id> copied_on;
 
@@ -28,7 +32,7 @@ struct Counted {
   std::vector<int> payload;
 
   Counted(int v, std::size_t size) : value{v}, payload(size, v) {}
-  Counted(const Counted& other) : value{other.value}, payload{other.payload} {
+  Counted(const Counted& other) : value{other.value}, payload{(begin_copy(), other.payload)} {
     ++copies;
     std::scoped_lock lock{mutex};
     copied_on.insert(std::this_thread::get_id());
@@ -37,6 +41,11 @@ struct Counted {
   Counted& operator=(const Counted&) = delete;
   Counted& operator=(Counted&&) noexcept = default;
   ~Counted() = default;
+
+  static void begin_copy() {
+    ++copies_begun;
+    hold_copies.wait(true);
+  }
 
   [[nodiscard]] bool intact() const {
     for (int x : payload)
@@ -49,6 +58,8 @@ class SourceFanOut : public ::testing::Test {
  protected:
   void SetUp() override {
     Counted::copies = 0;
+    Counted::copies_begun = 0;
+    Counted::hold_copies = false;
     Counted::copied_on.clear();
   }
   static LocalSource<Counted> source(Qos qos = {}) { return {"counted", qos, {}, Graph{}}; }
@@ -70,7 +81,7 @@ TEST_F(SourceFanOut, AMoveOnlyValueReachesItsOneReader) {
   EXPECT_THROW((void)owned.subscribe(), Failure) << "a second reader would need a copy";
 }
 
-TEST_F(SourceFanOut, OnlyAReaderThatTakesTheValueWhileAnotherHoldsItCopiesIt) {
+TEST_F(SourceFanOut, EveryReaderButTheLastToTakeTheValueCopiesIt) {
   auto counted = source();
   auto first = counted.subscribe();
   auto second = counted.subscribe();
@@ -111,10 +122,35 @@ TEST_F(SourceFanOut, AValueAReaderLeftUnreadIsMovedToTheOtherReader) {
   EXPECT_EQ(Counted::copies, 0);
 }
 
-// Readers taking one value at the same moment may each copy it (neither can
-// know the other is done with it), so the count of copies is not exact here;
-// where they are made is.
-TEST_F(SourceFanOut, ReadersOnTheirOwnThreadsGetEveryValueIntactAndMakeTheCopiesThemselves) {
+TEST_F(SourceFanOut, TheLastReaderWaitsForACopyUnderWayAndGetsTheValueMoved) {
+  auto counted = source();
+  auto first = counted.subscribe();
+  auto last = counted.subscribe();
+  Counted::hold_copies = true;
+  counted.publish({5, 64});
+
+  std::optional<Sample<Counted>> copied;
+  std::jthread copying{[&] { copied = first.try_read(); }};
+  while (Counted::copies_begun == 0) std::this_thread::yield();  // the first reader's copy is under way
+  std::jthread release{[&, reading = ::gettid()] {
+    (void)asleep_within(reading);  // once the read below waits (a reader that copied too waits as well)
+    Counted::hold_copies = false;
+    Counted::hold_copies.notify_all();
+  }};
+  auto moved = last.try_read();
+  copying.join();
+
+  EXPECT_EQ(Counted::copies, 1) << "the last reader copied the value instead of waiting for the copy under way";
+  ASSERT_TRUE(moved && copied);
+  EXPECT_TRUE(moved->value.intact());
+  EXPECT_TRUE(copied->value.intact());
+  EXPECT_EQ(moved->value.value, 5);
+}
+
+// Readers on their own threads take one value at overlapping moments: the
+// last to come waits for the copies under way and gets the value moved, so
+// n readers make n - 1 copies however their reads overlap.
+TEST_F(SourceFanOut, ReadersOnTheirOwnThreadsGetEveryValueIntactAndMakeOneCopyFewerThanThereAreReaders) {
   constexpr int kReaders = 3;
   constexpr int kValues = 2000;
   auto counted = source({.capacity = 16, .overflow = Overflow::block});
@@ -137,10 +173,10 @@ TEST_F(SourceFanOut, ReadersOnTheirOwnThreadsGetEveryValueIntactAndMakeTheCopies
           if (s && s->value.value == i && s->value.intact()) ++intact;
         }
       });
-    for (int i = 0; i < kValues; ++i) counted.publish({i, 256});
+    for (int i = 0; i < kValues; ++i) counted.publish({i, 4096});
   }
   EXPECT_EQ(intact, kReaders * kValues);
-  EXPECT_GE(Counted::copies, (kReaders - 1) * kValues) << "each reader needs a value of its own";
+  EXPECT_EQ(Counted::copies, (kReaders - 1) * kValues) << "each reader but the last needs a copy of its own";
   for (const auto& id : Counted::copied_on) EXPECT_TRUE(reader_threads.contains(id)) << "a copy made off the readers' threads";
 }
 

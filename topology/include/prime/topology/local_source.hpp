@@ -21,10 +21,10 @@ namespace prime {
 namespace detail {
 
 // Fans each published value out to every reader's own bounded queue. One
-// reader gets the value moved; several share it, and each copies it only when
-// it reads it while another reader still holds it (SharedSample), so the
-// publisher never copies and a large value is not copied for readers that
-// drop it.
+// reader gets the value moved; several share it (SharedSample): the last
+// reader to take it gets it moved and the others copy it when they read it,
+// so the publisher never copies, n readers make n - 1 copies, and a large
+// value is not copied for readers that drop it.
 //
 // Thread-safe: publish, attach and detach may run concurrently.
 template <class T>
