@@ -25,7 +25,10 @@ struct Qos {
   std::chrono::milliseconds block_timeout{1000};
   // How long a reader that finds its buffer empty keeps checking before it
   // sleeps. A value due within microseconds then costs no wake-up call; an
-  // idle reader still sleeps and burns nothing. Zero: sleep at once.
+  // idle reader still sleeps and burns nothing. Zero: sleep at once. A
+  // reader of an in-process source yields its core now and then as it
+  // checks, so on a machine with fewer cores than busy threads it does not
+  // keep the thread it waits for from running.
   std::chrono::microseconds spin{20};
   // How many of the source's values one reader may keep at once; 0: no
   // limit. Sources whose values pin scarce memory (a shared-memory topic's

@@ -139,7 +139,7 @@ class Queue {
                                            std::stop_token stop) {
     if (size_ > 0) return {};
     lock.unlock();
-    auto filled = [&] { return size_.load(std::memory_order_relaxed) > 0; };
+    auto filled = yielding([&] { return size_.load(std::memory_order_relaxed) > 0; });
     auto sleep = [&](Clock::time_point until) {
       std::unique_lock asleep{mutex_};
       ++waiting_readers_;

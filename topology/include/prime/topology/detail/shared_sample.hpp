@@ -88,7 +88,7 @@ class SharedSample {
         const auto now = using_value.load(std::memory_order_acquire);
         if (now != 1) using_value.wait(now, std::memory_order_acquire);
       };
-      (void)spin_then_sleep(alone, sleep, kCopySpin, Clock::time_point::max(), std::stop_token{});
+      (void)spin_then_sleep(yielding(alone), sleep, kCopySpin, Clock::time_point::max(), std::stop_token{});
     }
 
     // The box goes with the last claim to let go; until then a claim may

@@ -4,6 +4,8 @@
 #include <chrono>
 #include <optional>
 #include <stop_token>
+#include <thread>
+#include <utility>
 
 #include "prime/logic/sample.hpp"
 
@@ -17,6 +19,19 @@ inline void cpu_relax() noexcept {
 #elif defined(__aarch64__)
   asm volatile("yield");
 #endif
+}
+
+// `ready` for spin_then_sleep when what it waits for comes from another
+// thread of this process: every 64th look also yields the core. On a machine
+// with fewer cores than busy threads, a thread spinning on its core may keep
+// the very thread it waits for from running; a yield with no one else to run
+// returns at once.
+template <class Ready>
+[[nodiscard]] auto yielding(Ready ready) {
+  return [ready = std::move(ready), looks = 0]() mutable {
+    if (++looks % 64 == 0) std::this_thread::yield();
+    return ready();
+  };
 }
 
 enum class Waited { ready, timeout, stopped };
