@@ -28,7 +28,7 @@ inline void cpu_relax() noexcept {
 // returns at once.
 template <class Ready>
 [[nodiscard]] auto yielding(Ready ready) {
-  return [ready = std::move(ready), looks = 0]() mutable {
+  return [ready = std::move(ready), looks = 0u]() mutable {
     if (++looks % 64 == 0) std::this_thread::yield();
     return ready();
   };
