@@ -176,20 +176,26 @@ void run_one(const Suite& suite, const std::filesystem::path& binary, const std:
 
 // Each figure as the median of its rounds' values (the middle one, or the
 // lower of the two middle ones), in the order first measured; each skip once.
-Results medians(const Results& rounds) {
+Results medians(const std::vector<Results>& rounds) {
   Results out;
   std::vector<std::vector<double>> values;
-  for (const auto& f : rounds.figures) {
-    const auto same = [&](const Figure& g) {
-      return g.who == f.who && g.scenario == f.scenario && g.payload == f.payload && g.statistic == f.statistic;
-    };
-    const auto at = std::find_if(out.figures.begin(), out.figures.end(), same);
-    if (at == out.figures.end()) {
-      out.figures.push_back(f);
-      values.push_back({f.value});
-    } else {
-      values[static_cast<std::size_t>(at - out.figures.begin())].push_back(f.value);
+  for (const auto& round : rounds) {
+    for (const auto& f : round.figures) {
+      const auto same = [&](const Figure& g) {
+        return g.who == f.who && g.scenario == f.scenario && g.payload == f.payload && g.statistic == f.statistic;
+      };
+      const auto at = std::find_if(out.figures.begin(), out.figures.end(), same);
+      if (at == out.figures.end()) {
+        out.figures.push_back(f);
+        values.push_back({f.value});
+      } else {
+        values[static_cast<std::size_t>(at - out.figures.begin())].push_back(f.value);
+      }
     }
+    for (const auto& s : round.skipped)
+      if (std::none_of(out.skipped.begin(), out.skipped.end(),
+                       [&](const Skipped& t) { return t.suite == s.suite && t.benchmark == s.benchmark; }))
+        out.skipped.push_back(s);
   }
   for (std::size_t i = 0; i < values.size(); ++i) {
     auto& v = values[i];
@@ -197,10 +203,6 @@ Results medians(const Results& rounds) {
     std::nth_element(v.begin(), middle, v.end());
     out.figures[i].value = *middle;
   }
-  for (const auto& s : rounds.skipped)
-    if (std::none_of(out.skipped.begin(), out.skipped.end(),
-                     [&](const Skipped& t) { return t.suite == s.suite && t.benchmark == s.benchmark; }))
-      out.skipped.push_back(s);
   return out;
 }
 
@@ -243,14 +245,15 @@ int run(const Options& options) {
     for (std::size_t i = 0; i < plan.size(); ++i)
       if (round == 0 || round < plan[i].suite->full_repetitions) runs.emplace_back(round, i);
   Progress progress{runs.size()};
-  Results measured;
+  std::vector<Results> measured(static_cast<std::size_t>(rounds));  // each round's own figures
   for (std::size_t k = 0; k < runs.size() && !interrupted; ++k) {
     const auto [round, i] = runs[k];
     const auto& [suite, benchmark] = plan[i];
     progress.start(k, suite->name, benchmark);
     const auto t = Clock::now();
     const auto json = raw / (suite->name + "-" + std::to_string(i) + (rounds > 1 ? "-" + std::to_string(round + 1) : "") + ".json");
-    run_one(*suite, bin_dir / suite->binary, benchmark, options.quick, raw, json, progress, measured);
+    run_one(*suite, bin_dir / suite->binary, benchmark, options.quick, raw, json, progress,
+            measured[static_cast<std::size_t>(round)]);
     progress.finish(Clock::now() - t);
   }
   progress.end();
@@ -262,7 +265,7 @@ int run(const Options& options) {
                      .interrupted = interrupted.load(),
                      .took = std::chrono::duration_cast<std::chrono::seconds>(Clock::now() - began),
                      .benchmarks = plan.size()};
-  const auto written = write_report(out, results, machine, info);
+  const auto written = write_report(out, results, measured, machine, info);
   std::cout << written.headline << "\nReport: " << (out / "summary.md").string() << " (" << results.figures.size()
             << " figures in figures.csv";
   if (!written.plots.empty()) std::cout << ", " << written.plots.size() << " plots";

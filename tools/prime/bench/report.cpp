@@ -288,61 +288,101 @@ std::string availability_tables(const Results& r) {
   return out.str();
 }
 
-// The worst (largest) ratio of `who` to FOR over every Table 1 row.
-std::optional<double> worst_table1_ratio(const Results& r, const std::string& who) {
-  std::optional<double> worst;
+// A Table 1 row: its scenario (table1-<width>lane) and payload.
+struct Table1Row {
+  std::string scenario;
+  std::int64_t payload;
+
+  // "10 KiB × 2"
+  [[nodiscard]] std::string text() const {
+    return size_text(payload) + " × " + scenario.substr(std::string{"table1-"}.size(), 1);
+  }
+};
+using RowRatio = std::function<std::optional<double>(const Results&, const Table1Row&)>;
+
+// The Table 1 row of `who` where `ratio` is worst: the largest (`largest`),
+// else the least.
+std::optional<Table1Row> worst_table1_row(const Results& r, const std::string& who, const RowRatio& ratio, bool largest) {
+  std::optional<std::pair<Table1Row, double>> worst;
   for (const auto& f : r.figures)
-    if (f.who == who && f.scenario.starts_with("table1-"))
-      if (const auto ratio = divide(f.value, r.find("For", f.scenario, f.payload, "per hop")))
-        worst = std::max(worst.value_or(0), *ratio);
-  return worst;
+    if (f.who == who && f.scenario.starts_with("table1-")) {
+      const Table1Row row{f.scenario, f.payload};
+      if (const auto v = ratio(r, row); v && (!worst || (largest ? *v > worst->second : *v < worst->second)))
+        worst = {{row, *v}};
+    }
+  if (!worst) return std::nullopt;
+  return worst->first;
 }
 
-// Sources' throughput over the CCR-like peer's in the Table 1 row where it is least.
-std::optional<double> worst_sources_ratio(const Results& r) {
-  std::optional<double> worst;
-  for (const auto& f : r.figures)
-    if (f.who == "Sources" && f.scenario.starts_with("table1-"))
-      if (const auto ratio = divide(r.find("CcrLike", f.scenario, f.payload, "per hop"), f.value))
-        worst = std::min(worst.value_or(*ratio), *ratio);
-  return worst;
+// `who`'s time per hop over FOR's.
+RowRatio over_for(std::string who) {
+  return [who](const Results& r, const Table1Row& row) {
+    return divide(r.find(who, row.scenario, row.payload, "per hop"), r.find("For", row.scenario, row.payload, "per hop"));
+  };
+}
+// Sources' throughput over the CCR-like peer's: its time per hop over Sources'.
+std::optional<double> sources_over_ccr(const Results& r, const Table1Row& row) {
+  return divide(r.find("CcrLike", row.scenario, row.payload, "per hop"), r.find("Sources", row.scenario, row.payload, "per hop"));
 }
 
-std::string headline(const Results& r) {
+// The headline: each of Prime's figures and its ratios, every ratio from
+// the medians and, where the rounds one by one put it far apart (Range::
+// unsteady), with their range beside it.
+std::string headline(const Results& r, const std::vector<Results>& rounds) {
   std::ostringstream out;
   out << "| what | Prime | ratios |\n|---|---:|---|\n";
-  auto row = [&](const std::string& what, std::optional<double> mine, bool is_rate,
-                 std::vector<std::pair<std::string, std::optional<double>>> against) {
-    if (!mine) return;
-    out << "| " << what << " | " << (is_rate ? rate_text(*mine) : time_text(*mine)) << " |";
+  auto ratio_cell = [&](const Measure& ratio) {
+    auto text = ratio_text(ratio(r));
+    if (const auto range = range_over(rounds, ratio); range && range->unsteady())
+      text += " (" + number(range->low) + "–" + number(range->high) + "× round by round)";
+    return text;
+  };
+  auto row = [&](const std::string& what, const Measure& mine, bool is_rate,
+                 const std::vector<std::pair<std::string, Measure>>& against) {
+    const auto value = mine(r);
+    if (!value) return;
+    out << "| " << what << " | " << (is_rate ? rate_text(*value) : time_text(*value)) << " |";
     bool first = true;
-    for (const auto& [name, value] : against) {
-      if (!value) continue;
-      out << (first ? " " : " · ") << ratio_text(divide(mine, value)) << ' ' << name;
+    for (const auto& [name, other] : against) {
+      if (!other(r)) continue;
+      out << (first ? " " : " · ") << ratio_cell([&](const Results& in) { return divide(mine(in), other(in)); }) << ' '
+          << name;
       first = false;
     }
     out << " |\n";
   };
+  auto ratio_row = [&](const std::string& what, const Measure& ratio) {
+    if (ratio(r)) out << "| " << what << " | | " << ratio_cell(ratio) << " |\n";
+  };
+  auto at = [](std::string who, std::string scenario, std::int64_t payload, std::string statistic) -> Measure {
+    return [=](const Results& in) { return in.find(who, scenario, payload, statistic); };
+  };
   auto p50 = [&](const std::string& who, const std::string& scenario, std::int64_t payload) {
-    return r.find(who, scenario, payload, "p50");
+    return at(who, scenario, payload, "p50");
   };
-  auto fast_dds = [&](const std::string& scenario, std::int64_t payload, bool rate) {
-    std::optional<double> best;
-    for (const auto* who : {"FastDdsShm", "FastDdsLoan"}) {
-      const auto v = rate ? r.find(who, scenario, payload, "rate") : p50(who, scenario, payload);
-      if (v && (!best || (rate ? *v > *best : *v < *best))) best = v;
-    }
-    return best;
+  auto rate = [&](const std::string& who, const std::string& scenario, std::int64_t payload) {
+    return at(who, scenario, payload, "rate");
   };
-  // The throughput floors: the machine's (the faster depth here), and a ring
-  // as deep as the topics, when that is not the same one.
+  auto fast_dds = [](std::string scenario, std::int64_t payload, bool is_rate) -> Measure {
+    return [=](const Results& in) {
+      std::optional<double> best;
+      for (const auto* who : {"FastDdsShm", "FastDdsLoan"}) {
+        const auto v = in.find(who, scenario, payload, is_rate ? "rate" : "p50");
+        if (v && (!best || (is_rate ? *v > *best : *v < *best))) best = v;
+      }
+      return best;
+    };
+  };
+  // The throughput floors: the machine's (the faster depth in the medians,
+  // and that same ring in every round), and a ring as deep as the topics,
+  // when that is not the same one.
   const auto fastest = fastest_spsc_floor(r);
-  const std::pair<std::string, std::optional<double>> spsc{
-      "SPSC ring floor (" + std::string{fastest == "SpscFloor" ? "4096" : "256"} + " deep)",
-      r.find(fastest, "throughput", 64, "rate")};
-  const std::pair<std::string, std::optional<double>> spsc_as_deep{
+  const std::pair<std::string, Measure> spsc{
+      "SPSC ring floor (" + std::string{fastest == "SpscFloor" ? "4096" : "256"} + " deep)", rate(fastest, "throughput", 64)};
+  const std::pair<std::string, Measure> spsc_as_deep{
       "SPSC ring as deep as the topic (256)",
-      fastest == "SpscFloor256" ? std::nullopt : r.find("SpscFloor256", "throughput", 64, "rate")};
+      fastest == "SpscFloor256" ? Measure{[](const Results&) { return std::optional<double>{}; }}
+                                : rate("SpscFloor256", "throughput", 64)};
   for (const std::int64_t payload : {std::int64_t{64}, std::int64_t{1} << 20})
     row("Shm one-way latency, " + size_text(payload) + ", p50", p50("Shm", "latency", payload), false,
         {{"cache-line floor", p50("Floor", "latency", payload)},
@@ -351,51 +391,45 @@ std::string headline(const Results& r) {
   row("Shm one-way latency, sleeping reader, 64 B, p50", p50("Shm", "latency-sleeping", 64), false,
       {{"futex wake floor", p50("FutexWake", "latency-sleeping", 64)},
        {"iceoryx (WaitSet)", p50("IceoryxWaitSet", "latency-sleeping", 64)}});
-  row("Shm lossless throughput, 64 B (sensor's stamp)", r.find("Shm", "throughput", 64, "rate"), true,
-      {spsc, spsc_as_deep,
-       {"iceoryx", r.find("Iceoryx", "throughput", 64, "rate")},
-       {"Fast DDS", fast_dds("throughput", 64, true)}});
-  row("Shm lossless throughput, publisher's PublishFence::light, 64 B", r.find("ShmLight", "throughput", 64, "rate"), true,
-      {spsc, {"Shm with full fences", r.find("Shm", "throughput", 64, "rate")}});
+  row("Shm lossless throughput, 64 B (sensor's stamp)", rate("Shm", "throughput", 64), true,
+      {spsc, spsc_as_deep, {"iceoryx", rate("Iceoryx", "throughput", 64)}, {"Fast DDS", fast_dds("throughput", 64, true)}});
+  row("Shm lossless throughput, publisher's PublishFence::light, 64 B", rate("ShmLight", "throughput", 64), true,
+      {spsc, {"Shm with full fences", rate("Shm", "throughput", 64)}});
   row("Shm lossless throughput, publisher reading the clock for each stamp (publish()'s default), 64 B",
-      r.find("ShmClock", "throughput", 64, "rate"), true,
-      {{"with the sensor's stamp", r.find("Shm", "throughput", 64, "rate")}});
-  row("Shm lossless throughput in batches (loan_some / read_some), 64 B", r.find("ShmBatch", "throughput", 64, "rate"), true,
-      {spsc, spsc_as_deep,
-       {"Shm one at a time", r.find("Shm", "throughput", 64, "rate")}});
+      rate("ShmClock", "throughput", 64), true, {{"with the sensor's stamp", rate("Shm", "throughput", 64)}});
+  row("Shm lossless throughput in batches (loan_some / read_some), 64 B", rate("ShmBatch", "throughput", 64), true,
+      {spsc, spsc_as_deep, {"Shm one at a time", rate("Shm", "throughput", 64)}});
   row("Shm lossless throughput in batches read as Views (loan_some / BatchReader), 64 B",
-      r.find("ShmViews", "throughput", 64, "rate"), true,
-      {spsc, spsc_as_deep,
-       {"read_some", r.find("ShmBatch", "throughput", 64, "rate")}});
+      rate("ShmViews", "throughput", 64), true,
+      {spsc, spsc_as_deep, {"read_some", rate("ShmBatch", "throughput", 64)}});
   row("Shm publisher alone, in batches (one process, nobody reading: its own bookkeeping), 64 B",
-      r.find("ShmBatch", "publisher-alone", 64, "rate"), true,
-      {spsc, {"Views across processes", r.find("ShmViews", "throughput", 64, "rate")}});
-  row("Shm publisher alone, one at a time, 64 B", r.find("Shm", "publisher-alone", 64, "rate"), true,
-      {spsc, {"Shm across processes", r.find("Shm", "throughput", 64, "rate")}});
-  row("Shm publish to 4 reader processes, 64 B (publisher's time per message)",
-      r.find("Shm", "fanout-publish-4", 64, "publish"), false,
-      {{"1 reader", r.find("Shm", "fanout-publish-1", 64, "publish")},
-       {"cache-line floor", p50("Floor", "latency", 64)}});
+      rate("ShmBatch", "publisher-alone", 64), true,
+      {spsc, {"Views across processes", rate("ShmViews", "throughput", 64)}});
+  row("Shm publisher alone, one at a time, 64 B", rate("Shm", "publisher-alone", 64), true,
+      {spsc, {"Shm across processes", rate("Shm", "throughput", 64)}});
+  row("Shm publish to 4 reader processes, 64 B (publisher's time per message)", at("Shm", "fanout-publish-4", 64, "publish"),
+      false, {{"1 reader", at("Shm", "fanout-publish-1", 64, "publish")}, {"cache-line floor", p50("Floor", "latency", 64)}});
   row("Shm service round trip, 64 B, p50", p50("ShmService", "round-trip", 64), false,
-      {{"iceoryx request/response", p50("Iceoryx", "round-trip", 64)},
-       {"Unix socket", p50("UnixSocket", "round-trip", 64)}});
-  if (const auto radiant = worst_table1_ratio(r, "Radiant"))
-    out << "| Radiant vs FOR (worst Table 1 row) | | " << ratio_text(radiant) << " |\n";
-  if (const auto liberty = worst_table1_ratio(r, "Liberty"))
-    out << "| Liberty vs FOR (worst Table 1 row) | | " << ratio_text(liberty) << " |\n";
-  if (const auto sources = worst_sources_ratio(r))
-    out << "| Sources throughput vs CCR-like (worst Table 1 row) | | " << ratio_text(sources) << " |\n";
-  row("Optimus hop", r.find("Optimus", "hop", 0, "mean"), false,
-      {{"hiredis request/reply", r.find("hiredis", "request-reply", 0, "mean")},
-       {"PING", r.find("hiredis", "ping", 0, "mean")}});
+      {{"iceoryx request/response", p50("Iceoryx", "round-trip", 64)}, {"Unix socket", p50("UnixSocket", "round-trip", 64)}});
+  // Each Table 1 comparison at its worst row in the medians, and that row's range.
+  auto table1_row = [&](const std::string& what, const std::string& who, const RowRatio& ratio, bool largest) {
+    if (const auto row = worst_table1_row(r, who, ratio, largest))
+      ratio_row(what + " (worst Table 1 row: " + row->text() + ")",
+                [&, row = *row](const Results& in) { return ratio(in, row); });
+  };
+  table1_row("Radiant vs FOR", "Radiant", over_for("Radiant"), true);
+  table1_row("Liberty vs FOR", "Liberty", over_for("Liberty"), true);
+  table1_row("Sources throughput vs CCR-like", "Sources", sources_over_ccr, false);
+  row("Optimus hop", at("Optimus", "hop", 0, "mean"), false,
+      {{"hiredis request/reply", at("hiredis", "request-reply", 0, "mean")}, {"PING", at("hiredis", "ping", 0, "mean")}});
   row("Optimus streaming, batches of 64 (StreamingPublisher: one in flight while the next is sent)",
-      r.find("Optimus", "publish-streamed", 64, "rate"), true,
-      {{"redis-benchmark XADD -P 64", r.find("redis-benchmark", "xadd-pipelined", 64, "rate")},
-       {"Optimus publish_all", r.find("Optimus", "publish-pipelined", 64, "rate")}});
-  row("Optimus publishing, batches of 64 (publish_all)", r.find("Optimus", "publish-pipelined", 64, "rate"), true,
-      {{"redis-benchmark XADD -P 64", r.find("redis-benchmark", "xadd-pipelined", 64, "rate")},
+      rate("Optimus", "publish-streamed", 64), true,
+      {{"redis-benchmark XADD -P 64", rate("redis-benchmark", "xadd-pipelined", 64)},
+       {"Optimus publish_all", rate("Optimus", "publish-pipelined", 64)}});
+  row("Optimus publishing, batches of 64 (publish_all)", rate("Optimus", "publish-pipelined", 64), true,
+      {{"redis-benchmark XADD -P 64", rate("redis-benchmark", "xadd-pipelined", 64)},
        {"redis-benchmark XADD -P 64 -c 1 (one batch in flight)",
-        r.find("redis-benchmark", "xadd-pipelined-one-client", 64, "rate")}});
+        rate("redis-benchmark", "xadd-pipelined-one-client", 64)}});
   return out.str();
 }
 
@@ -419,8 +453,8 @@ std::string size_text(std::int64_t bytes) {
   return std::to_string(bytes) + " B";
 }
 
-Written write_report(const std::filesystem::path& dir, const Results& results, const Machine& machine,
-                     const RunInfo& info) {
+Written write_report(const std::filesystem::path& dir, const Results& results, const std::vector<Results>& rounds,
+                     const Machine& machine, const RunInfo& info) {
   std::filesystem::create_directories(dir);
   {
     std::ofstream csv{dir / "figures.csv"};
@@ -429,9 +463,17 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
       csv << f.who << ',' << f.scenario << ',' << f.payload << ',' << f.statistic << ',' << number(f.value, "%.6g") << ','
           << f.unit << '\n';
   }
+  if (rounds.size() > 1) {
+    std::ofstream csv{dir / "rounds.csv"};
+    csv << "round,who,scenario,payload,statistic,value,unit\n";
+    for (std::size_t i = 0; i < rounds.size(); ++i)
+      for (const auto& f : rounds[i].figures)
+        csv << i + 1 << ',' << f.who << ',' << f.scenario << ',' << f.payload << ',' << f.statistic << ','
+            << number(f.value, "%.6g") << ',' << f.unit << '\n';
+  }
   Written written;
   written.plots = write_plots(dir, results, written.plot_problem);
-  written.headline = headline(results);
+  written.headline = headline(results, rounds);
 
   std::ofstream md{dir / "summary.md"};
   const auto minutes = info.took.count() / 60, seconds = info.took.count() % 60;
@@ -446,7 +488,13 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
                       "machine's load (the availability tests, of fixed length, run once, in the first round). ")
      << "Latency is one way (half a round trip); its percentiles come from every round trip's own timing. "
         "Every ratio compares figures of this one run: the machine is shared and noisy, so compare ratios, not "
-        "absolute times, between runs. Cells: p50 / p99.\n\n"
+        "absolute times, between runs. "
+     << (info.quick ? ""
+                    : "Where the three rounds, each taken alone, put a headline ratio far apart (the highest over "
+                      "1.25× the lowest), the machine changed state during the run; the ratio then holds for one "
+                      "state only, and its range round by round stands beside it (each round's figures are in "
+                      "rounds.csv). ")
+     << "Cells: p50 / p99.\n\n"
      << "## Headline\n\n" << written.headline << '\n';
   auto image = [&](const std::string& name, const std::string& alt) {
     if (std::find(written.plots.begin(), written.plots.end(), name) != written.plots.end())

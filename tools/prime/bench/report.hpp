@@ -2,6 +2,7 @@
 
 // The report folder of `prime bench`:
 //   figures.csv   every figure: who, scenario, payload, statistic, value, unit
+//   rounds.csv    a full run's figures round by round (figures.csv has their medians)
 //   summary.md    the machine, headline ratios, a table per scenario (each
 //                 Prime cell with its ratio to the floor and to the best
 //                 peer), the plots, and what was skipped and why
@@ -32,8 +33,9 @@ struct Written {
   std::string plot_problem;        // why plots are missing, if they are
 };
 
-Written write_report(const std::filesystem::path& dir, const Results& results, const Machine& machine,
-                     const RunInfo& info);
+// `results`: each figure's median over `rounds`, each round's own figures.
+Written write_report(const std::filesystem::path& dir, const Results& results, const std::vector<Results>& rounds,
+                     const Machine& machine, const RunInfo& info);
 
 // Plots of `results` in dir/plots; returns the names rendered, and sets
 // `problem` when gnuplot could not render them.

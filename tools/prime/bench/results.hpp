@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <set>
 #include <string>
@@ -52,6 +53,33 @@ struct Results {
     return {all.begin(), all.end()};
   }
 };
+
+// A figure or ratio worked out from Results: from the medians, or from one
+// round's figures alone.
+using Measure = std::function<std::optional<double>(const Results&)>;
+
+// The lowest and highest a measure came to in the rounds taken one by one:
+// how far the machine's state moved it within a run. None with fewer than
+// two rounds that give it.
+struct Range {
+  double low;
+  double high;
+  // Rounds this far apart (the highest over 1.25x the lowest) say the machine
+  // changed state during the run: a comparison from its medians then holds
+  // for one state only, and the report shows the range beside it.
+  [[nodiscard]] bool unsteady() const { return high > 1.25 * low; }
+};
+inline std::optional<Range> range_over(const std::vector<Results>& rounds, const Measure& measure) {
+  std::optional<Range> range;
+  int seen = 0;
+  for (const auto& round : rounds)
+    if (const auto v = measure(round)) {
+      ++seen;
+      range = range ? Range{std::min(range->low, *v), std::max(range->high, *v)} : Range{*v, *v};
+    }
+  if (seen < 2) return std::nullopt;
+  return range;
+}
 
 // Roles in the comparisons: Prime's own media, the floors a medium cannot
 // beat, and the peers a user would pick instead.
