@@ -375,6 +375,25 @@ void time_stream(benchmark::State& state, Receive receive) {
   state.SetItemsProcessed(state.iterations());
 }
 
+// Times the benchmark's iterations, each sending one message or one batch,
+// and reports `msgs/s`, counting messages. send(seq) sends seq, seq + 1...
+// and returns how many it sent. A few messages are sent untimed first.
+template <class Send>
+void time_sending(benchmark::State& state, Send send) {
+  std::uint64_t seq = 1;
+  while (seq <= kWarmUpMessages) seq += send(seq);
+  std::uint64_t sent = 0;
+  const auto start = std::chrono::steady_clock::now();
+  for (auto _ : state) {
+    const std::uint64_t n = send(seq);
+    seq += n;
+    sent += n;
+  }
+  const std::chrono::duration<double> elapsed = std::chrono::steady_clock::now() - start;
+  state.counters["msgs/s"] = static_cast<double>(sent) / elapsed.count();
+  state.SetItemsProcessed(static_cast<std::int64_t>(sent));
+}
+
 // The PeerError for a stream that delivered `got` where `expected` was due.
 [[nodiscard]] PeerError out_of_sequence(std::uint64_t expected, std::uint64_t got);
 

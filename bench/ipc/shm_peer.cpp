@@ -28,7 +28,8 @@
 //                    each batch let go of at once, not view by view.
 //   PublisherAlone   Throughput's publishing side (ShmBatch's, for
 //                    PublisherAlone_ShmBatch) in this one process, on the same
-//                    topic with no subscriber, one message per iteration. No
+//                    topic with no subscriber, its loop as the child's: one
+//                    message (one batch) per iteration, no more around it. No
 //                    cache line crosses cores, no one is waited for: what is
 //                    left is the publisher's own bookkeeping per message, the
 //                    most it could ever send to another process. The only
@@ -131,26 +132,35 @@ const ipc::ChildEntry kStream{"Shm.stream", stream<shm::PublishFence::full, fals
 const ipc::ChildEntry kStreamLight{"Shm.stream_light", stream<shm::PublishFence::light, false>};
 const ipc::ChildEntry kStreamClock{"Shm.stream_clock", stream<shm::PublishFence::full, true>};
 
+// Loans up to kBatch samples, writes seq, seq + 1... into them, each stamped
+// by its sensor (`start` plus one tick per sample, as stream's), and
+// publishes them at once. Returns how many. `stamps`: room for kBatch.
+std::size_t send_batch(shm::Publisher<shm::Bytes>& publisher, std::size_t bytes, std::uint64_t seq,
+                       prime::Clock::time_point start, std::vector<prime::Clock::time_point>& stamps) {
+  auto batch = publisher.loan_some(kBatch, bytes);
+  if (!batch) throw ipc::PeerError{"shm: " + batch.error().describe()};
+  stamps.clear();
+  for (std::size_t i = 0; i < batch->size(); ++i) {
+    ipc::stamp(batch->bytes(i).data(), seq + i);
+    stamps.push_back(start + prime::Clock::duration{seq + i});
+  }
+  std::move(*batch).publish(stamps);
+  return stamps.size();
+}
+
 void stream_batches(ipc::Child& self) {
   shm::Core core{self.arg(0)};
   auto out = core.publisher<shm::Bytes>("stream", batch_qos(self.bytes()));
   self.ready();
   const auto start = prime::Clock::now();
-  std::vector<prime::Clock::time_point> stamps;  // each sample's, from its sensor (as stream's)
+  std::vector<prime::Clock::time_point> stamps;
   stamps.reserve(kBatch);
   for (std::uint64_t seq = 1, checked = 0;;) {
     if (seq - checked >= 1024) {
       self.check();
       checked = seq;
     }
-    auto batch = out.loan_some(kBatch, self.bytes());
-    if (!batch) throw ipc::PeerError{"shm: " + batch.error().describe()};
-    stamps.clear();
-    for (std::size_t i = 0; i < batch->size(); ++i, ++seq) {
-      ipc::stamp(batch->bytes(i).data(), seq);
-      stamps.push_back(start + prime::Clock::duration{seq});
-    }
-    std::move(*batch).publish(stamps);
+    seq += send_batch(out, self.bytes(), seq, start, stamps);
   }
 }
 const ipc::ChildEntry kStreamBatches{"Shm.stream_batches", stream_batches};
@@ -273,28 +283,13 @@ void publisher_alone(benchmark::State& state) {
     shm::Core core{domain};
     auto out = core.publisher<shm::Bytes>("stream", kBatches ? batch_qos(bytes) : stream_qos(bytes));
     const auto start = prime::Clock::now();
-    std::optional<shm::Batch<shm::Bytes>> batch;  // being written, when kBatches
     std::vector<prime::Clock::time_point> stamps;
     stamps.reserve(kBatch);
-    // As the other side would receive them: seq = 1, 2, 3..., one per iteration.
-    ipc::time_stream(state, [&](std::uint64_t seq) {
-      const auto stamp = start + prime::Clock::duration{seq};
-      if constexpr (!kBatches) {
-        send(out, bytes, seq, stamp);
-      } else {
-        if (!batch) {
-          auto loaned = out.loan_some(kBatch, bytes);
-          if (!loaned) throw ipc::PeerError{"shm: " + loaned.error().describe()};
-          batch.emplace(std::move(*loaned));
-          stamps.clear();
-        }
-        ipc::stamp(batch->bytes(stamps.size()).data(), seq);
-        stamps.push_back(stamp);
-        if (stamps.size() == batch->size()) {
-          std::move(*batch).publish(stamps);
-          batch.reset();
-        }
-      }
+    // As the stream children send: one message, or one batch, per iteration.
+    ipc::time_sending(state, [&](std::uint64_t seq) -> std::size_t {
+      if constexpr (kBatches) return send_batch(out, bytes, seq, start, stamps);
+      send(out, bytes, seq, start + prime::Clock::duration{seq});
+      return 1;
     });
   });
 }
