@@ -71,7 +71,8 @@ class SharedSample {
   static constexpr std::chrono::microseconds kCopySpin{5};
 
   struct Box {
-    Box(Sample<T>&& s, std::uint32_t readers) : sample{std::move(s)}, to_come{readers}, using_value{readers}, holders{readers} {}
+    Box(Sample<T>&& s, std::uint32_t readers)
+        : sample{std::move(s)}, to_come{readers}, using_value{readers}, holders{readers} {}
 
     // Counts this claim as taken or given up; true if it is the last.
     bool arrive() noexcept { return to_come.fetch_sub(1, std::memory_order_acq_rel) == 1; }
