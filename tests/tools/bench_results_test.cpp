@@ -10,6 +10,8 @@ namespace {
 using prime::tool::bench::Figure;
 using prime::tool::bench::Results;
 using prime::tool::bench::fastest_spsc_floor;
+using prime::tool::bench::is_floor;
+using prime::tool::bench::is_peer;
 using prime::tool::bench::Measure;
 using prime::tool::bench::range_over;
 
@@ -23,6 +25,19 @@ TEST(BenchResults, TheFloorIsTheDeepRingWhereItMovesMore) {
 TEST(BenchResults, TheFloorIsTheShallowRingWhereItMovesMore) {
   const Results r{{rate("SpscFloor", 78e6), rate("SpscFloor256", 230e6)}, {}};
   EXPECT_EQ(fastest_spsc_floor(r), "SpscFloor256");
+}
+
+// A ring laying a header beside each payload is a floor for its layout: not
+// a peer Shm is ranked against, nor the floor the ratios are to, even where
+// it moves more than the plain rings.
+TEST(BenchResults, RingsOfOtherLayoutsAreFloorsButNeverTheFloor) {
+  for (const auto* who : {"SpscInline", "SpscBeside", "SpscShmLayout"}) {
+    EXPECT_TRUE(is_floor(who)) << who;
+    EXPECT_FALSE(is_peer(who)) << who;
+  }
+  EXPECT_TRUE(is_peer("Iceoryx"));
+  const Results r{{rate("SpscFloor", 70e6), rate("SpscFloor256", 60e6), rate("SpscBeside", 250e6)}, {}};
+  EXPECT_EQ(fastest_spsc_floor(r), "SpscFloor");
 }
 
 TEST(BenchResults, TheFloorIsTheOneRingMeasuredWhenTheOtherIsMissing) {

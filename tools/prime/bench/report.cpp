@@ -401,7 +401,15 @@ std::string headline(const Results& r, const std::vector<Results>& rounds) {
       {spsc, spsc_as_deep, {"Shm one at a time", rate("Shm", "throughput", 64)}});
   row("Shm lossless throughput in batches read as Views (loan_some / BatchReader), 64 B",
       rate("ShmViews", "throughput", 64), true,
-      {spsc, spsc_as_deep, {"read_some", rate("ShmBatch", "throughput", 64)}});
+      {spsc, spsc_as_deep, {"read_some", rate("ShmBatch", "throughput", 64)},
+       {"an SPSC ring of Shm's layout", rate("SpscShmLayout", "throughput", 64)}});
+  // What a ring moves once each 64-byte payload carries a header, as a
+  // medium's must: the floor for each way of laying it out.
+  for (const auto& [who, what] : {std::pair{"SpscInline", "the header inline (128-byte slots)"},
+                                  std::pair{"SpscBeside", "the header beside the payloads (16-byte records)"},
+                                  std::pair{"SpscShmLayout", "Shm's layout (ring entry, info, chunk header)"}})
+    row(std::string{"SPSC ring, 256 deep, 64 B with "} + what + ", nothing else done", rate(who, "throughput", 64),
+        true, {spsc});
   row("Shm publisher alone, in batches (one process, nobody reading: its own bookkeeping), 64 B",
       rate("ShmBatch", "publisher-alone", 64), true,
       {spsc, {"Views across processes", rate("ShmViews", "throughput", 64)}});
@@ -519,6 +527,14 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
         "iceoryx, Fast DDS and POSIX queue peers' queues in these benchmarks. Which depth moves more differs by CPU "
         "(4096 on some, 256 on others), so the floor, the most this machine moves, is the faster of the two in this "
         "run: " << fastest_spsc_floor(results) << " here, the one the ratios above are to.\n\n"
+     << "The floor's message is 64 bytes with its sequence inside: one cache line. A medium's 64-byte payload "
+        "travels with a header (sequence, size, stamp), so the same ring, 256 deep, also runs with the header laid "
+        "out three ways, each written and read as the floor's slots are, nothing else done: SpscInline, 128-byte "
+        "slots with the header on the line before the payload; SpscBeside, 16-byte records, four to a line, in an "
+        "array beside the payload slots; SpscShmLayout, Shm's own segment layout (ring entries naming chunks, sizes "
+        "and stamps beside them, chunks of a header block and a payload block, taken in turn). Each is the most a "
+        "medium of that layout could move read one message at a time; batches, which read several ring entries at "
+        "a look, can beat it.\n\n"
      << "The headline's \"publisher alone\" rows run Shm's publishing side by itself, in one process, on the same "
         "topic with nobody reading: no cache line crosses cores, so their rate is the publisher's own bookkeeping, "
         "the most it could send to another process.\n\n";

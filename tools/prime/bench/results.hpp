@@ -83,8 +83,11 @@ inline std::optional<Range> range_over(const std::vector<Results>& rounds, const
 
 // Roles in the comparisons: Prime's own media, the floors a medium cannot
 // beat, and the peers a user would pick instead.
+// The SPSC rings (SpscFloor, and those that lay a header beside each
+// payload: SpscInline, SpscBeside, SpscShmLayout) are floors: what the
+// hardware moves for their layout, with nothing else done.
 inline bool is_floor(const std::string& who) {
-  return who == "Floor" || who == "FutexWake" || who == "SpscFloor" || who == "SpscFloor256";
+  return who == "Floor" || who == "FutexWake" || who.starts_with("Spsc");
 }
 inline bool is_prime(const std::string& who) {
   return who.starts_with("Shm") || who == "Optimus" || who == "Radiant" || who == "Liberty" || who.starts_with("Sources");
