@@ -26,8 +26,9 @@
 // The floor's message is 64 bytes with its sequence inside, one cache line.
 // A medium's 64-byte payload travels with a header (its sequence, size and
 // stamp), so the same ring, 256 deep, with nothing else changed, also runs
-// with the header laid out three ways: the most a ring of that layout can
-// move, before any bookkeeping of its own.
+// with the header laid out three ways: what a ring of that layout moves,
+// one message at a time, before any bookkeeping of its own (a reader of
+// batches, looking at several ring entries at once, may move more).
 // - SpscInline: 128-byte slots, the header on the line before the payload.
 // - SpscBeside: 16-byte records (sequence, size), four to a line, in an array
 //   of their own beside the 64-byte payload slots.
@@ -44,6 +45,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <new>
 
 #include "harness.hpp"
 #include "payload.hpp"
