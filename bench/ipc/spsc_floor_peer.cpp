@@ -25,13 +25,17 @@
 //
 // The floor's message is 64 bytes with its sequence inside, one cache line.
 // A medium's 64-byte payload travels with a header (its sequence, size and
-// stamp), so the same ring, 256 deep, with nothing else changed, also runs
-// with the header laid out three ways: what a ring of that layout moves,
-// one message at a time, before any bookkeeping of its own (a reader of
-// batches, looking at several ring entries at once, may move more).
+// stamp), so the same ring, 256 deep, also runs with the header laid out
+// four ways, read in batches as Shm's batch readers read (the entries of
+// up to 32 messages out, then each one): what a ring of that layout moves
+// before any bookkeeping of its own.
 // - SpscInline: 128-byte slots, the header on the line before the payload.
-// - SpscBeside: 16-byte records (sequence, size), four to a line, in an array
-//   of their own beside the 64-byte payload slots.
+// - SpscRecords: 32-byte records (sequence, size, stamp), two to a line, in
+//   an array of their own beside the 64-byte payload slots.
+// - SpscRecordsHeaders: the same, and a chunk header (layout.hpp's
+//   ChunkHeader: who holds it, sequence, size, stamp) written for each
+//   message on a line of its own, as Shm's publisher writes one so that a
+//   reader may hold a sample past its place in the ring.
 // - SpscShmLayout: Shm's own layout, from its TopicGeometry (layout.hpp): a
 //   ring of entries naming chunks, the sizes and stamps beside it, and
 //   chunks of a 128-byte header block and a payload block, taken in turn
@@ -61,10 +65,12 @@ static_assert(std::atomic<std::uint64_t>::is_always_lock_free, "atomics across p
 // A layout: where message `seq` (1, 2, 3...) lies. The producer write()s it;
 // the consumer polls has(seq), then read(seq) gives the sequence its payload
 // carries (0 when its header does not describe a 64-byte message).
+// kBatches: whether the consumer reads it in batches.
 template <std::uint64_t kSlots>
 struct Slots {
   static_assert(kSlots > 0 && (kSlots & (kSlots - 1)) == 0, "a power of two, to index by mask");
   static constexpr std::uint64_t kDepth = kSlots;
+  static constexpr bool kBatches = false;
 
   // seq: 0 until the slot's first message; then the sequence it carries.
   struct alignas(64) Slot {
@@ -97,6 +103,7 @@ void write_payload(std::byte* payload, std::uint64_t seq) noexcept {
 
 struct Inline {
   static constexpr std::uint64_t kDepth = ::kDepth;
+  static constexpr bool kBatches = true;
   struct alignas(64) Place {
     std::atomic<std::uint64_t> seq;
     std::uint64_t size;
@@ -122,23 +129,36 @@ struct Inline {
   }
 };
 
-struct Beside {
+template <bool kHeaders>
+struct Records {
   static constexpr std::uint64_t kDepth = ::kDepth;
+  static constexpr bool kBatches = true;
   struct Record {
     std::atomic<std::uint64_t> seq;
     std::uint64_t size;
+    std::int64_t stamp;
+    std::uint64_t unused;
   };
-  static_assert(sizeof(Record) == 16);
+  static_assert(sizeof(Record) == 32);
   struct alignas(64) Payload {
     std::byte bytes[kPayload];
   };
   Record records[kDepth]{};
   alignas(4096) Payload payloads[kDepth]{};  // a page apart, as Shm's infos and chunks
+  alignas(4096) layout::ChunkHeader headers[kHeaders ? kDepth : 1]{};
 
   void write(std::uint64_t seq) noexcept {
     const auto i = (seq - 1) % kDepth;
     write_payload(payloads[i].bytes, seq);
+    if constexpr (kHeaders) {
+      auto& header = headers[i];
+      header.size = kPayload;
+      header.stamp = static_cast<std::int64_t>(seq);
+      header.seq.store(seq, std::memory_order_release);
+      header.holders.store(layout::kRingBit, std::memory_order_release);
+    }
     records[i].size = kPayload;
+    records[i].stamp = static_cast<std::int64_t>(seq);
     records[i].seq.store(seq, std::memory_order_release);
   }
   [[nodiscard]] bool has(std::uint64_t seq) noexcept {
@@ -146,7 +166,8 @@ struct Beside {
   }
   [[nodiscard]] std::uint64_t read(std::uint64_t seq) noexcept {
     const auto i = (seq - 1) % kDepth;
-    return records[i].size == kPayload ? ipc::seq_of(payloads[i].bytes) : 0;
+    return records[i].size == kPayload && records[i].stamp == static_cast<std::int64_t>(seq) ? ipc::seq_of(payloads[i].bytes)
+                                                                                               : 0;
   }
 };
 
@@ -155,6 +176,7 @@ struct Beside {
 // Shm's own geometry; its header part goes unused.
 struct ShmLayout {
   static constexpr std::uint64_t kDepth = ::kDepth;
+  static constexpr bool kBatches = true;
   static constexpr layout::TopicGeometry kGeometry{kDepth, kPayload, 1, 32};
   alignas(4096) std::byte segment[kGeometry.bytes()]{};
 
@@ -229,13 +251,22 @@ void throughput(benchmark::State& state, const char* producer) {
     });
     child.wait_ready();
     child.go();
+    // In batches: the messages known to be out run to `out`; once all are
+    // read, the slots go back and the next batch is looked for.
+    std::uint64_t out = 0;
     ipc::time_stream(state, [&](std::uint64_t seq) {
-      if (!ready()) {
+      if constexpr (Layout::kBatches) {
+        if (tail == out) {
+          ring.tail.store(tail, std::memory_order_release);
+          if (!ready()) ipc::spin_until(child, ready);
+          for (out = tail + 1; out - tail < kBatch && ring.layout.has(out + 1);) ++out;
+        }
+      } else if (!ready()) {
         ring.tail.store(tail, std::memory_order_release);
         ipc::spin_until(child, ready);
       }
       const auto got = ring.layout.read(tail + 1);
-      if (++tail % kBatch == 0) ring.tail.store(tail, std::memory_order_release);
+      if (++tail % kBatch == 0 && !Layout::kBatches) ring.tail.store(tail, std::memory_order_release);
       if (got != seq) throw ipc::out_of_sequence(seq, got);
     });
     child.stop();
@@ -247,18 +278,23 @@ using Floor256 = Slots<kDepth>;
 const ipc::ChildEntry kFloor{"SpscFloor.produce", produce<Floor>};
 const ipc::ChildEntry kFloor256{"SpscFloor256.produce", produce<Floor256>};
 const ipc::ChildEntry kInline{"SpscInline.produce", produce<Inline>};
-const ipc::ChildEntry kBeside{"SpscBeside.produce", produce<Beside>};
+const ipc::ChildEntry kRecords{"SpscRecords.produce", produce<Records<false>>};
+const ipc::ChildEntry kRecordsHeaders{"SpscRecordsHeaders.produce", produce<Records<true>>};
 const ipc::ChildEntry kShmLayout{"SpscShmLayout.produce", produce<ShmLayout>};
 
 void BM_Throughput_SpscFloor(benchmark::State& state) { throughput<Floor>(state, "SpscFloor.produce"); }
 void BM_Throughput_SpscFloor256(benchmark::State& state) { throughput<Floor256>(state, "SpscFloor256.produce"); }
 void BM_Throughput_SpscInline(benchmark::State& state) { throughput<Inline>(state, "SpscInline.produce"); }
-void BM_Throughput_SpscBeside(benchmark::State& state) { throughput<Beside>(state, "SpscBeside.produce"); }
+void BM_Throughput_SpscRecords(benchmark::State& state) { throughput<Records<false>>(state, "SpscRecords.produce"); }
+void BM_Throughput_SpscRecordsHeaders(benchmark::State& state) {
+  throughput<Records<true>>(state, "SpscRecordsHeaders.produce");
+}
 void BM_Throughput_SpscShmLayout(benchmark::State& state) { throughput<ShmLayout>(state, "SpscShmLayout.produce"); }
 BENCHMARK(BM_Throughput_SpscFloor)->Arg(64)->UseRealTime();
 BENCHMARK(BM_Throughput_SpscFloor256)->Arg(64)->UseRealTime();
 BENCHMARK(BM_Throughput_SpscInline)->Arg(64)->UseRealTime();
-BENCHMARK(BM_Throughput_SpscBeside)->Arg(64)->UseRealTime();
+BENCHMARK(BM_Throughput_SpscRecords)->Arg(64)->UseRealTime();
+BENCHMARK(BM_Throughput_SpscRecordsHeaders)->Arg(64)->UseRealTime();
 BENCHMARK(BM_Throughput_SpscShmLayout)->Arg(64)->UseRealTime();
 
 }  // namespace

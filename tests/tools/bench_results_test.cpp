@@ -31,12 +31,12 @@ TEST(BenchResults, TheFloorIsTheShallowRingWhereItMovesMore) {
 // a peer Shm is ranked against, nor the floor the ratios are to, even where
 // it moves more than the plain rings.
 TEST(BenchResults, RingsOfOtherLayoutsAreFloorsButNeverTheFloor) {
-  for (const auto* who : {"SpscInline", "SpscBeside", "SpscShmLayout"}) {
+  for (const auto* who : {"SpscInline", "SpscRecords", "SpscRecordsHeaders", "SpscShmLayout"}) {
     EXPECT_TRUE(is_floor(who)) << who;
     EXPECT_FALSE(is_peer(who)) << who;
   }
   EXPECT_TRUE(is_peer("Iceoryx"));
-  const Results r{{rate("SpscFloor", 70e6), rate("SpscFloor256", 60e6), rate("SpscBeside", 250e6)}, {}};
+  const Results r{{rate("SpscFloor", 70e6), rate("SpscFloor256", 60e6), rate("SpscRecords", 250e6)}, {}};
   EXPECT_EQ(fastest_spsc_floor(r), "SpscFloor");
 }
 

@@ -83,9 +83,9 @@ inline std::optional<Range> range_over(const std::vector<Results>& rounds, const
 
 // Roles in the comparisons: Prime's own media, the floors a medium cannot
 // beat, and the peers a user would pick instead.
-// The SPSC rings (SpscFloor, and those that lay a header beside each
-// payload: SpscInline, SpscBeside, SpscShmLayout) are floors: what the
-// hardware moves for their layout, with nothing else done.
+// The SPSC rings (SpscFloor, and those that carry a header with each
+// payload: SpscInline, SpscRecords, SpscRecordsHeaders, SpscShmLayout) are
+// floors: what the hardware moves for their layout, nothing else done.
 inline bool is_floor(const std::string& who) {
   return who == "Floor" || who == "FutexWake" || who.starts_with("Spsc");
 }
