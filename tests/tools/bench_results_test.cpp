@@ -27,7 +27,7 @@ TEST(BenchResults, TheFloorIsTheShallowRingWhereItMovesMore) {
   EXPECT_EQ(fastest_spsc_floor(r), "SpscFloor256");
 }
 
-// A ring laying a header beside each payload is a floor for its layout: not
+// A ring carrying a header with each payload is a floor for its layout: not
 // a peer Shm is ranked against, nor the floor the ratios are to, even where
 // it moves more than the plain rings.
 TEST(BenchResults, RingsOfOtherLayoutsAreFloorsButNeverTheFloor) {
