@@ -166,8 +166,8 @@ struct Records {
   }
   [[nodiscard]] std::uint64_t read(std::uint64_t seq) noexcept {
     const auto i = (seq - 1) % kDepth;
-    return records[i].size == kPayload && records[i].stamp == static_cast<std::int64_t>(seq) ? ipc::seq_of(payloads[i].bytes)
-                                                                                               : 0;
+    const bool described = records[i].size == kPayload && records[i].stamp == static_cast<std::int64_t>(seq);
+    return described ? ipc::seq_of(payloads[i].bytes) : 0;
   }
 };
 
