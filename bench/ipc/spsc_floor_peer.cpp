@@ -265,8 +265,9 @@ void throughput(benchmark::State& state, const char* producer) {
         ring.tail.store(tail, std::memory_order_release);
         ipc::spin_until(child, ready);
       }
-      const auto got = ring.layout.read(tail + 1);
-      if (++tail % kBatch == 0 && !Layout::kBatches) ring.tail.store(tail, std::memory_order_release);
+      const auto got = ring.layout.read(++tail);
+      if constexpr (!Layout::kBatches)
+        if (tail % kBatch == 0) ring.tail.store(tail, std::memory_order_release);
       if (got != seq) throw ipc::out_of_sequence(seq, got);
     });
     child.stop();
