@@ -38,8 +38,9 @@
 //   so that a reader may hold a sample past its place in the ring.
 // - SpscShmLayout: Shm's own layout, from its TopicGeometry (layout.hpp): a
 //   ring of entries naming chunks, the sizes and stamps beside it, the
-//   chunks' 32-byte states and their payloads, chunks taken in turn as
-//   Shm's publisher takes them; each written as a publish writes it.
+//   chunks' states (a 128-byte block each) and their payloads, chunks
+//   taken in turn as Shm's publisher takes them; each written as a publish
+//   writes it.
 //
 //   Throughput  the child writes seq = 1, 2, 3... into the ring as fast as
 //               it has room; the parent takes one per iteration and checks

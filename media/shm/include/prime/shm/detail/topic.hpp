@@ -19,11 +19,12 @@
 
 namespace prime::shm::detail {
 
-// Where a topic's ring, infos, chunks' states and payloads lie in this process: addresses and
-// sizes read once from its header, when it was checked, so no later write
-// there sends an access out of the segment. A hot loop takes a copy, which
-// stays in registers: read through the topic, every atomic stored in the
-// loop would have the compiler load them from memory again.
+// Where a topic's ring, infos, chunks' states and payloads lie in this
+// process: addresses and sizes read once from its header, when it was
+// checked, so no later write there sends an access out of the segment. A
+// hot loop takes a copy, which stays in registers: read through the topic,
+// every atomic stored in the loop would have the compiler load them from
+// memory again.
 struct Places {
   std::atomic<std::uint64_t>* rings;
   SampleInfo* infos;

@@ -236,9 +236,9 @@ class Writer {
   }
 
  private:
-  // Sample `seq`'s size and stamp: in its chunk's state, for readers that hold it,
-  // and beside its ring entry, for batch readers their cursor keeps
-  // (SampleInfo). Both before the ring entry.
+  // Sample `seq`'s size and stamp: in its chunk's state, for readers that
+  // hold it, and beside its ring entry, for batch readers their cursor
+  // keeps (SampleInfo). Both before the ring entry.
   static void describe(ChunkState& c, SampleInfo& info, std::size_t size, Clock::time_point stamp) noexcept {
     const auto ticks = stamp.time_since_epoch().count();
     c.size = size;
