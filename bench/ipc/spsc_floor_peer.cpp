@@ -32,15 +32,14 @@
 // - SpscInline: 128-byte slots, the header on the line before the payload.
 // - SpscRecords: 32-byte records (sequence, size, stamp), two to a line, in
 //   an array of their own beside the 64-byte payload slots.
-// - SpscRecordsHeaders: the same, and a chunk's state (layout.hpp's
-//   ChunkState: who holds it, sequence, size, stamp) written for each
-//   message in a 128-byte block of its own, as Shm's publisher writes one
-//   so that a reader may hold a sample past its place in the ring.
+// - SpscRecordsHeaders: the same, and a chunk header (layout.hpp's
+//   ChunkHeader: who holds it, sequence, size, stamp) written for each
+//   message on a line of its own, as Shm's publisher writes one so that a
+//   reader may hold a sample past its place in the ring.
 // - SpscShmLayout: Shm's own layout, from its TopicGeometry (layout.hpp): a
-//   ring of entries naming chunks, the sizes and stamps beside it, the
-//   chunks' states (a 128-byte block each) and their payloads, chunks
-//   taken in turn as Shm's publisher takes them; each written as a publish
-//   writes it.
+//   ring of entries naming chunks, the sizes and stamps beside it, and
+//   chunks of a 128-byte header block and a payload block, taken in turn
+//   as Shm's publisher takes them; each written as a publish writes it.
 //
 //   Throughput  the child writes seq = 1, 2, 3... into the ring as fast as
 //               it has room; the parent takes one per iteration and checks
@@ -146,7 +145,7 @@ struct Records {
   };
   Record records[kDepth]{};
   alignas(4096) Payload payloads[kDepth]{};  // a page apart, as Shm's infos and chunks
-  alignas(4096) layout::ChunkState headers[kHeaders ? kDepth : 1]{};
+  alignas(4096) layout::ChunkHeader headers[kHeaders ? kDepth : 1]{};
 
   void write(std::uint64_t seq) noexcept {
     const auto i = (seq - 1) % kDepth;
@@ -187,22 +186,19 @@ struct ShmLayout {
   layout::SampleInfo& info(std::uint64_t seq) noexcept {
     return std::launder(reinterpret_cast<layout::SampleInfo*>(segment + kGeometry.info_offset()))[seq % kDepth];
   }
-  layout::ChunkState& state(std::uint32_t c) noexcept {
-    return std::launder(reinterpret_cast<layout::ChunkState*>(segment + kGeometry.states_offset()))[c];
-  }
   std::byte* chunk(std::uint32_t c) noexcept { return segment + kGeometry.chunks_offset() + c * kGeometry.chunk_stride(); }
 
-  // As Writer::publish_some: the payload, the chunk's state, the info, then
-  // the ring entry. Chunks are taken in turn, as they come back to a
+  // As Writer::publish_some: the payload, the chunk's header, the info,
+  // then the ring entry. Chunks are taken in turn, as they come back to a
   // publisher whose subscriber keeps up.
   void write(std::uint64_t seq) noexcept {
     const auto c = static_cast<std::uint32_t>(seq % kGeometry.chunk_count());
-    write_payload(chunk(c), seq);
-    auto& s = state(c);
-    s.size = kPayload;
-    s.stamp = static_cast<std::int64_t>(seq);
-    s.seq.store(seq, std::memory_order_release);
-    s.holders.store(layout::kRingBit, std::memory_order_release);
+    write_payload(chunk(c) + layout::kPayloadOffset, seq);
+    auto& header = *std::launder(reinterpret_cast<layout::ChunkHeader*>(chunk(c)));
+    header.size = kPayload;
+    header.stamp = static_cast<std::int64_t>(seq);
+    header.seq.store(seq, std::memory_order_release);
+    header.holders.store(layout::kRingBit, std::memory_order_release);
     info(seq).size.store(kPayload, std::memory_order_release);
     info(seq).stamp.store(static_cast<std::int64_t>(seq), std::memory_order_release);
     ring(seq).store(layout::RingEntry::pack(seq, c), std::memory_order_release);
@@ -215,7 +211,7 @@ struct ShmLayout {
   [[nodiscard]] std::uint64_t read(std::uint64_t seq) noexcept {
     const auto c = layout::RingEntry::chunk(ring(seq).load(std::memory_order_relaxed));
     if (c >= kGeometry.chunk_count() || info(seq).size.load(std::memory_order_acquire) != kPayload) return 0;
-    return ipc::seq_of(chunk(c));
+    return ipc::seq_of(chunk(c) + layout::kPayloadOffset);
   }
 };
 

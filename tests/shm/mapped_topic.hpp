@@ -37,11 +37,11 @@ class MappedTopic {
     return within(timeout, [&] { return header().space.sleepers.load() != 0; });
   }
 
-  // Chunk `i`'s state, ring entry and info of sequence `seq`, found by the
-  // header as it is now.
-  [[nodiscard]] shm::detail::ChunkState& chunk(std::size_t i) const {
+  // Chunk `i`, ring entry and info of sequence `seq`, found by the header
+  // as it is now.
+  [[nodiscard]] shm::detail::ChunkHeader& chunk(std::size_t i) const {
     const auto& h = header();
-    return std::launder(reinterpret_cast<shm::detail::ChunkState*>(segment_->data() + h.states_offset))[i];
+    return *std::launder(reinterpret_cast<shm::detail::ChunkHeader*>(segment_->data() + h.chunks_offset + i * h.chunk_stride));
   }
   [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const {
     const auto& h = header();

@@ -307,18 +307,17 @@ TEST_F(ShmTest, RawByteTopicsCarryMessagesUpToTheirMaximum) {
 TEST_F(ShmTest, ATopicTakesTheMemoryItsQosSaysAllReservedAtCreation) {
   const shm::TopicQos qos{.capacity = 16, .max_message_size = 4096, .max_subscribers = 2, .max_held = 3};
   const auto expected = shm::topic_memory<shm::Bytes>(qos);
-  const std::size_t chunks = (16 + 2 * 3 + 2) * (4096 + 128);  // 24 chunks: the payload and the chunk's state
+  const std::size_t chunks = (16 + 2 * 3 + 2) * (128 + 4096);  // 24 chunks: a header's block and the payload
   EXPECT_GE(expected, chunks);
-  EXPECT_LT(expected - chunks, 16384u)
-      << "the rest is the topic's header, its ring and its infos, and the rounding of them and the states to pages";
+  EXPECT_LT(expected - chunks, 16384u) << "the rest is the topic's header, its ring and its infos, each from a page";
   auto publisher = core.publisher<shm::Bytes>("sized", qos);
   struct stat st {};
   ASSERT_EQ(::stat(("/dev/shm/" + shm::detail::segment_name(core.domain(), "topic", "sized")).c_str(), &st), 0);
   EXPECT_EQ(static_cast<std::size_t>(st.st_size), expected);
   EXPECT_GE(static_cast<std::size_t>(st.st_blocks) * 512, expected) << "every byte is allocated, not only sized";
   const auto by_default = shm::topic_memory<std::uint64_t>({});
-  EXPECT_GE(by_default, (64u + 8 * 8 + 2) * (64 + 128));  // a payload's line and a state's block
-  EXPECT_LT(by_default, (64u + 8 * 8 + 2) * (64 + 128) + 16384)
+  EXPECT_GE(by_default, (64u + 8 * 8 + 2) * 256);  // a header's block and a payload's
+  EXPECT_LT(by_default, (64u + 8 * 8 + 2) * 256 + 16384)
       << "default QoS: about twice the ring's capacity in chunks, not nine times";
 }
 
@@ -387,7 +386,7 @@ TEST_F(ShmTest, AHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheSegment) {
     auto& h = mapped.header();
     constexpr std::uint64_t kFar = 1ull << 40;
     h.chunk_stride = h.chunk_count = h.capacity = h.max_message_size = kFar;
-    h.ring_offset = h.info_offset = h.states_offset = h.chunks_offset = kFar;
+    h.ring_offset = h.info_offset = h.chunks_offset = kFar;
     h.max_subscribers = 1000;  // slots past the header's 62
     h.max_held = 1ull << 30;
     h.overflow = 7;

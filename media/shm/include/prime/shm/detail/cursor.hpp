@@ -252,7 +252,7 @@ class Cursor {
   // batch, and the next take skips what was lost.
   //
   // In two passes: the ring entries of what is out first, each chunk's
-  // state fetched for writing and its payload for reading as it is
+  // header line fetched for writing and its payload for reading as it is
   // found, then the holds. So the lines travel from the publisher together,
   // not one after another, each hold waiting for its own.
   std::size_t take_some(std::size_t max, std::vector<Taken>& out) {

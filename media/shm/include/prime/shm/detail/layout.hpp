@@ -16,14 +16,14 @@ namespace prime::shm::detail {
 // pointers), so each process may map it anywhere.
 //
 //   TopicHeader | ring: capacity × RingEntry word | info: capacity × SampleInfo
-//               | states: chunk_count × ChunkState | chunks: chunk_count × payload
+//               | chunks: chunk_count × (ChunkHeader block + payload)
 //
 // Samples live in chunks. The ring names the chunks of the last `capacity`
 // sequences; a chunk is free when no one holds it. Who holds a chunk is one
-// word of bits in its state: one per subscriber slot, one for the ring and
-// one for the publisher's loan. So a subscriber reads a sample in place for
-// as long as it likes, the publisher never reuses a chunk someone reads,
-// and a dead subscriber's holds are cleared by clearing its bit everywhere.
+// word of bits: one per subscriber slot, one for the ring and one for the
+// publisher's loan. So a subscriber reads a sample in place for as long as
+// it likes, the publisher never reuses a chunk someone reads, and a dead
+// subscriber's holds are cleared by clearing its bit everywhere.
 
 static_assert(std::atomic<std::uint64_t>::is_always_lock_free, "shared memory needs lock-free 64-bit atomics");
 static_assert(std::atomic<std::uint32_t>::is_always_lock_free, "shared memory needs lock-free 32-bit atomics");
@@ -35,7 +35,7 @@ using ParticipantId = std::uint64_t;
 inline constexpr ParticipantId kReclaiming = ~0ull;  // a slot whose dead owner is being cleared
 
 inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;  // "PRIMESM4"
-inline constexpr std::uint32_t kLayoutVersion = 10;
+inline constexpr std::uint32_t kLayoutVersion = 9;
 // Room for a message type's description (prime::schema_of), for tools.
 inline constexpr std::size_t kSchemaCapacity = 2048;
 // Subscriber slots a topic may offer; one more is kept for tools that observe.
@@ -48,17 +48,29 @@ inline constexpr std::uint64_t kNotPublished = ~0ull;  // a chunk's sequence whe
 inline constexpr std::uint32_t kNoChunk = (1u << 24) - 1;
 inline constexpr std::uint64_t kNoCursor = ~0ull;      // a subscriber slot not (yet) reading
 inline constexpr std::size_t kPayloadAlignment = 64;
-// The infos, the chunks' states and their payloads each start a page: a
-// reader walking one of them does not have the hardware prefetcher pull in
-// the lines after it, which the publisher writes (measured: batches of
-// views at 64 bytes 1.2x faster than with the parts packed to the line).
+// The infos and the chunks each start a page: a reader walking the ring or
+// the infos does not have the hardware prefetcher pull in the lines after
+// them, which the publisher writes (measured: batches of views at 64 bytes
+// 1.2x faster than with the parts packed to the line).
 inline constexpr std::size_t kPageAlignment = 4096;
+// A chunk's header has a 128-byte block to itself, and its payload starts
+// at the next: a reader of the payload alone (a batch of views) then does
+// not have the adjacent-line prefetcher, which fetches lines in 128-byte
+// pairs, pull in the header the publisher writes for each sample, and the
+// publisher finds the header's line still its own (measured on an AMD
+// EPYC, 64-byte messages: batches of views 1.1x, read_some batches 1.4x
+// faster than with header and payload sharing a block; latency and views
+// at 1 MiB unchanged; read_some at 1 MiB about 0.9x, a held sample's header
+// and payload now two fetches, not one pair). Chunks are whole blocks, so
+// no payload shares one with the next chunk's header either.
+inline constexpr std::size_t kChunkAlignment = 2 * kPayloadAlignment;
+inline constexpr std::size_t kPayloadOffset = kChunkAlignment;  // from a chunk's start
 inline constexpr std::uint64_t kPublisherSleeper = 1;  // the space doorbell's one sleeper
 
 // A ring entry: which chunk carries which sequence, in one word, so that a
 // busy subscriber polls one cache line and learns both that its next sample
 // is out and where it is. The sequence is kept modulo 2^40 (compared with
-// wrap-around); the full one is in the chunk's state, which a subscriber checks.
+// wrap-around); the full one is in the chunk, which a subscriber checks.
 struct RingEntry {
   static constexpr int kChunkBits = 24;
   static constexpr int kSeqBits = 40;
@@ -84,7 +96,7 @@ static_assert(RingEntry::kChunkBits + RingEntry::kSeqBits == 64);
 // A published sample's size and stamp, beside its ring entry (info[i] goes
 // with ring[i]), written before the entry. A batch reader that its cursor
 // keeps (Cursor::take_batch) reads them here, four samples to a line, and
-// not in the chunks' states, which then stay in the publisher's cache.
+// not in the chunks' headers, which then stay in the publisher's cache.
 // Those keep their own copy: a reader holding a chunk reads it there, as
 // the ring may name another sample by then. Stored with release and loaded
 // with acquire: a value the publisher wrote after passing the reader over
@@ -95,29 +107,13 @@ struct SampleInfo {
 };
 static_assert(sizeof(SampleInfo) == 16);
 
-// A chunk's state: who holds it, which sequence it carries, and that
-// sample's size and stamp, which a reader holding the chunk reads here (the
-// ring may name another sample by then). The states lie in an array of
-// their own, the payloads in another, back to back: a batch of views, which
-// reads payloads and never a state, reads its samples' payloads as one run
-// of lines, and a chunk of a small message takes 192 bytes, not 256 as with
-// a header block before each payload. Measured on an AMD EPYC at 64 bytes,
-// 14 rounds alternating with that layout (9): batches of views 1.07x
-// (0.85-1.38x between quartiles), read_some batches 0.99x.
-// Each state has a 128-byte block to itself: the adjacent-line prefetcher
-// fetches lines in 128-byte pairs, and a subscriber taking its hold on one
-// state would otherwise pull in the next chunk's, which the publisher
-// writes. States packed two to a line made batches of views 1.2x faster
-// (the publisher's lines for them stay in its L1), but read_some batches,
-// which hold each sample, 0.72x (0.67-0.81x between quartiles; one to a
-// line, back to back, about as slow).
-struct alignas(2 * kPayloadAlignment) ChunkState {
+struct alignas(kPayloadAlignment) ChunkHeader {
   std::atomic<std::uint64_t> holders{0};
   std::atomic<std::uint64_t> seq{kNotPublished};
   std::uint64_t size = 0;   // bytes of payload in use
   std::int64_t stamp = 0;   // steady_clock ticks (CLOCK_MONOTONIC: one clock for every process)
 };
-static_assert(sizeof(ChunkState) == 2 * kPayloadAlignment, "each chunk's state in a 128-byte block of its own");
+static_assert(sizeof(ChunkHeader) <= kPayloadOffset, "a chunk's header lies before its payload");
 
 inline constexpr std::uint32_t kWaitedFor = 0;  // SubscriberSlot::lagging
 inline constexpr std::uint32_t kPinning = 1;
@@ -152,7 +148,6 @@ struct TopicHeader {
   std::uint64_t max_held = 0;
   std::uint64_t ring_offset = 0;
   std::uint64_t info_offset = 0;
-  std::uint64_t states_offset = 0;
   std::uint64_t chunks_offset = 0;
   char schema[kSchemaCapacity]{};  // the message type's description; "?<size>" when it has none
 
@@ -210,15 +205,11 @@ struct TopicGeometry {
   [[nodiscard]] constexpr std::size_t info_offset() const {
     return round_up(ring_offset() + capacity * sizeof(std::uint64_t), kPageAlignment);
   }
-  [[nodiscard]] constexpr std::size_t states_offset() const {
+  [[nodiscard]] constexpr std::size_t chunks_offset() const {
     return round_up(info_offset() + capacity * sizeof(SampleInfo), kPageAlignment);
   }
-  [[nodiscard]] constexpr std::size_t chunks_offset() const {
-    return round_up(states_offset() + chunk_count() * sizeof(ChunkState), kPageAlignment);
-  }
-  // Payloads start on a line each; one of no bytes still has a line.
   [[nodiscard]] constexpr std::size_t chunk_stride() const {
-    return max_message_size == 0 ? kPayloadAlignment : round_up(max_message_size, kPayloadAlignment);
+    return round_up(kPayloadOffset + max_message_size, kChunkAlignment);
   }
   [[nodiscard]] constexpr std::size_t bytes() const { return chunks_offset() + chunk_count() * chunk_stride(); }
 };
@@ -239,8 +230,7 @@ inline std::string damage(const TopicHeader& h, const TopicGeometry& g, std::siz
            " bytes and max_held " + std::to_string(g.max_held);
   if (g.chunk_count() >= kNoChunk) return std::to_string(g.chunk_count()) + " chunks, more than a ring entry can name";
   if (h.chunk_count != g.chunk_count() || h.chunk_stride != g.chunk_stride() || h.ring_offset != g.ring_offset() ||
-      h.info_offset != g.info_offset() || h.states_offset != g.states_offset() ||
-      h.chunks_offset != g.chunks_offset())
+      h.info_offset != g.info_offset() || h.chunks_offset != g.chunks_offset())
     return "a layout that does not follow from its capacity, message size and subscriber slots";
   if (g.bytes() > size)
     return std::to_string(g.bytes()) + " bytes of layout in a segment of " + std::to_string(size);

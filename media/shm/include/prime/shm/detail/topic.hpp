@@ -19,20 +19,18 @@
 
 namespace prime::shm::detail {
 
-// Where a topic's ring, infos, chunks' states and payloads lie in this
-// process: addresses and sizes read once from its header, when it was
-// checked, so no later write there sends an access out of the segment. A
-// hot loop takes a copy, which stays in registers: read through the topic,
-// every atomic stored in the loop would have the compiler load them from
-// memory again.
+// Where a topic's ring, infos and chunks lie in this process: addresses and
+// sizes read once from its header, when it was checked, so no later write
+// there sends an access out of the segment. A hot loop takes a copy, which
+// stays in registers: read through the topic, every atomic stored in the
+// loop would have the compiler load them from memory again.
 struct Places {
   std::atomic<std::uint64_t>* rings;
   SampleInfo* infos;
-  ChunkState* states;
   std::byte* chunks;
   std::uint64_t capacity;
   std::uint64_t mask;    // capacity - 1 where that is a power of two, else 0
-  std::uint64_t stride;  // from one chunk's payload to the next
+  std::uint64_t stride;  // from one chunk to the next
   std::uint64_t chunk_count;
   std::uint64_t max_size;  // of a payload
 
@@ -53,8 +51,10 @@ struct Places {
   [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept { return rings[ring_index(seq)]; }
   // The size and stamp beside ring(seq) (SampleInfo).
   [[nodiscard]] SampleInfo& info(std::uint64_t seq) const noexcept { return infos[ring_index(seq)]; }
-  [[nodiscard]] ChunkState& chunk(std::uint32_t i) const noexcept { return states[i]; }
-  [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept { return chunks + i * stride; }
+  [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept {
+    return *std::launder(reinterpret_cast<ChunkHeader*>(chunks + i * stride));
+  }
+  [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept { return chunks + i * stride + kPayloadOffset; }
 };
 
 // A topic's segment mapped into this process, shared by its publisher and
@@ -106,7 +106,7 @@ class Topic {
   [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept { return places_.ring(seq); }
   [[nodiscard]] std::uint64_t ring_index(std::uint64_t seq) const noexcept { return places_.ring_index(seq); }
   [[nodiscard]] SampleInfo& info(std::uint64_t seq) const noexcept { return places_.info(seq); }
-  [[nodiscard]] ChunkState& chunk(std::uint32_t i) const noexcept { return places_.chunk(i); }
+  [[nodiscard]] ChunkHeader& chunk(std::uint32_t i) const noexcept { return places_.chunk(i); }
   [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept { return places_.payload(i); }
   [[nodiscard]] TopicQos qos() const noexcept {
     const auto& h = *header_;
@@ -174,7 +174,6 @@ class Topic {
         overflow_{header_->overflow == static_cast<std::uint32_t>(Overflow::block) ? Overflow::block : Overflow::drop_oldest},
         places_{.rings = reinterpret_cast<std::atomic<std::uint64_t>*>(segment_.data() + geometry_.ring_offset()),
                 .infos = std::launder(reinterpret_cast<SampleInfo*>(segment_.data() + geometry_.info_offset())),
-                .states = std::launder(reinterpret_cast<ChunkState*>(segment_.data() + geometry_.states_offset())),
                 .chunks = segment_.data() + geometry_.chunks_offset(),
                 .capacity = geometry_.capacity,
                 .mask = std::has_single_bit(geometry_.capacity) ? geometry_.capacity - 1 : 0,
@@ -216,7 +215,6 @@ class Topic {
     header->block_timeout_ns.store(std::chrono::nanoseconds{qos.block_timeout}.count());
     header->ring_offset = geometry.ring_offset();
     header->info_offset = geometry.info_offset();
-    header->states_offset = geometry.states_offset();
     header->chunks_offset = geometry.chunks_offset();
     header->head.store(first);
     // Each entry one lap behind the first sequence that will land in it: nothing published yet.
@@ -228,7 +226,7 @@ class Topic {
       ::new (data + header->info_offset + k * sizeof(SampleInfo)) SampleInfo{};
     }
     for (std::size_t i = 0; i < header->chunk_count; ++i)
-      ::new (data + header->states_offset + i * sizeof(ChunkState)) ChunkState{};
+      ::new (data + header->chunks_offset + i * header->chunk_stride) ChunkHeader{};
     header->magic.store(kTopicMagic, std::memory_order_release);
   }
 

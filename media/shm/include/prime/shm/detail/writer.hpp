@@ -162,10 +162,9 @@ class Writer {
 
   // Publishes loaned chunks of `size` bytes each as the next sequences, in
   // order, chunk i stamped stamp_of(i). Never waits. As publish() does, for
-  // all at once: every chunk's state, then the ring entries one after
-  // another (a subscriber polling the ring fetches its line once for several
-  // samples, not once for each), the chunks they push out, then the head
-  // and one wake.
+  // all at once: every header, then the ring entries one after another (a
+  // subscriber polling the ring fetches its line once for several samples,
+  // not once for each), the chunks they push out, then the head and one wake.
   template <class StampOf>
   void publish_some(std::span<const std::uint32_t> chunks, std::size_t size, StampOf&& stamp_of) noexcept {
     const auto places = topic_->places();
@@ -236,10 +235,10 @@ class Writer {
   }
 
  private:
-  // Sample `seq`'s size and stamp: in its chunk's state, for readers that
-  // hold it, and beside its ring entry, for batch readers their cursor
-  // keeps (SampleInfo). Both before the ring entry.
-  static void describe(ChunkState& c, SampleInfo& info, std::size_t size, Clock::time_point stamp) noexcept {
+  // Sample `seq`'s size and stamp: in its chunk, for readers that hold it,
+  // and beside its ring entry, for batch readers their cursor keeps
+  // (SampleInfo). Both before the ring entry.
+  static void describe(ChunkHeader& c, SampleInfo& info, std::size_t size, Clock::time_point stamp) noexcept {
     const auto ticks = stamp.time_since_epoch().count();
     c.size = size;
     c.stamp = ticks;
@@ -289,7 +288,7 @@ class Writer {
   // (it was free, or left the ring unheld, when it was loaned), so a plain
   // store does: a bit a subscriber sets meanwhile is one it takes back at
   // once, as the chunk does not carry the sequence it looked for.
-  static void to_ring(ChunkState& c) noexcept { c.holders.store(kRingBit, std::memory_order_release); }
+  static void to_ring(ChunkHeader& c) noexcept { c.holders.store(kRingBit, std::memory_order_release); }
 
   // Keeps a few chunks claimed ahead of the loans (those leaving the ring
   // count: they become spares when evicted), and their lines on their way
