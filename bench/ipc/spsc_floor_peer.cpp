@@ -33,9 +33,9 @@
 // - SpscRecords: 32-byte records (sequence, size, stamp), two to a line, in
 //   an array of their own beside the 64-byte payload slots.
 // - SpscRecordsHeaders: the same, and a chunk header (layout.hpp's
-//   ChunkHeader: who holds it, sequence, size, stamp) written for each
-//   message on a line of its own, as Shm's publisher writes one so that a
-//   reader may hold a sample past its place in the ring.
+//   ChunkHeader: its size and stamp) written for each message on a line of
+//   its own, as Shm's publisher writes one so that a reader may hold a
+//   sample past its place in the ring.
 // - SpscShmLayout: Shm's own layout, from its TopicGeometry (layout.hpp): a
 //   ring of entries naming chunks, the sizes and stamps beside it, and
 //   chunks of a 128-byte header block and a payload block, taken in turn
@@ -154,8 +154,6 @@ struct Records {
       auto& header = headers[i];
       header.size = kPayload;
       header.stamp = static_cast<std::int64_t>(seq);
-      header.seq.store(seq, std::memory_order_release);
-      header.holders.store(layout::kRingBit, std::memory_order_release);
     }
     records[i].size = kPayload;
     records[i].stamp = static_cast<std::int64_t>(seq);
@@ -197,8 +195,6 @@ struct ShmLayout {
     auto& header = *std::launder(reinterpret_cast<layout::ChunkHeader*>(chunk(c)));
     header.size = kPayload;
     header.stamp = static_cast<std::int64_t>(seq);
-    header.seq.store(seq, std::memory_order_release);
-    header.holders.store(layout::kRingBit, std::memory_order_release);
     info(seq).size.store(kPayload, std::memory_order_release);
     info(seq).stamp.store(static_cast<std::int64_t>(seq), std::memory_order_release);
     ring(seq).store(layout::RingEntry::pack(seq, c), std::memory_order_release);

@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/segment.hpp"
@@ -52,21 +53,26 @@ class MappedTopic {
     return std::launder(reinterpret_cast<shm::detail::SampleInfo*>(segment_->data() + h.info_offset))[seq % h.capacity];
   }
 
-  // Who holds chunk `i` (its holders word: a bit per subscriber slot, the
-  // ring's and the loan's).
+  // Who holds chunk `i` (its holders word: a bit per subscriber slot, and
+  // the publisher's).
   [[nodiscard]] std::uint64_t holders(std::size_t i) const { return chunk(i).holders.load(); }
-  // How many chunks are held by the ring alone, and how many by anyone else
-  // or anything more.
+  // How many chunks the ring names and the publisher alone holds, and how
+  // many are held otherwise: by the publisher outside the ring (its loans,
+  // its spares, chunks on their way out of the ring), or by a subscriber.
   struct Census {
     std::size_t ring_only = 0;
     std::size_t other = 0;
   };
   [[nodiscard]] Census census() const {
+    const auto& h = header();
+    std::vector<bool> named(h.chunk_count, false);
+    for (std::uint64_t i = 0; i < h.capacity; ++i)
+      if (const auto c = shm::detail::RingEntry::chunk(ring(i).load()); c < h.chunk_count) named[c] = true;
     Census c;
-    for (std::size_t i = 0; i < header().chunk_count; ++i) {
-      const auto h = holders(i);
-      if (h == shm::detail::kRingBit) ++c.ring_only;
-      else if (h != 0) ++c.other;
+    for (std::size_t i = 0; i < h.chunk_count; ++i) {
+      const auto held = holders(i);
+      if (held == shm::detail::kPublisherBit && named[i]) ++c.ring_only;
+      else if (held != 0) ++c.other;
     }
     return c;
   }

@@ -31,11 +31,11 @@ class ViewsTest : public ::testing::Test {
  protected:
   shm::Core core{unique_domain("views")};
 
-  // Chunks some subscriber holds by its bit (not the ring's or a loan's).
+  // Chunks some subscriber holds by its bit (not the publisher's).
   static std::size_t held_by_subscribers(const MappedTopic& topic) {
     std::size_t n = 0;
     for (std::size_t i = 0; i < topic.header().chunk_count; ++i)
-      n += (topic.holders(i) & ~(shm::detail::kRingBit | shm::detail::kLoanBit)) != 0 ? 1 : 0;
+      n += (topic.holders(i) & ~shm::detail::kPublisherBit) != 0 ? 1 : 0;
     return n;
   }
 };

@@ -533,7 +533,7 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
         "out four ways, read in batches as Shm's batch readers read (the entries of up to 32 messages out, then "
         "each message), nothing else done: SpscInline, 128-byte slots with the header on the line before the "
         "payload; SpscRecords, 32-byte records (sequence, size, stamp) in an array beside the payload slots; "
-        "SpscRecordsHeaders, the same and a chunk header (holders, sequence, size, stamp) written for each message "
+        "SpscRecordsHeaders, the same and a chunk header (size, stamp) written for each message "
         "on a line of its own, as Shm's publisher writes one so that a reader may hold a sample past its place in "
         "the ring; SpscShmLayout, Shm's own segment layout (ring entries naming chunks, sizes and stamps beside "
         "them, chunks of a header block and a payload block, taken in turn).\n\n"

@@ -33,6 +33,9 @@ struct LoaningWriter {
   Writer writer;
   std::size_t loans = 0;
   std::shared_ptr<LoaningWriter> orphaned;  // set while loans outlive the publisher
+  // The last batch's list of chunks, kept for the next: a batch then costs
+  // no allocation.
+  std::vector<std::uint32_t> chunk_list;
 
   // A loan (or a batch) ends: the last to end after the publisher is gone
   // takes the writer with it.
@@ -165,6 +168,7 @@ class Batch {
   }
   void end() noexcept {
     chunks_.clear();
+    owner_->chunk_list = std::move(chunks_);
     detail::LoaningWriter::end_loan(std::exchange(owner_, nullptr));
   }
 
@@ -273,7 +277,8 @@ class Publisher {
   std::expected<std::vector<std::uint32_t>, Error> loan_chunks(std::size_t max) {
     if (max == 0)
       return std::unexpected(Error{Errc::limit_exceeded, "topic '" + name() + "': a batch of 0 slots asked for"});
-    std::vector<std::uint32_t> chunks;
+    auto chunks = std::move(owner_->chunk_list);
+    chunks.clear();
     chunks.reserve(max);
     if (auto done = owner_->writer.loan_some(max, chunks); !done) return std::unexpected(std::move(done.error()));
     return chunks;

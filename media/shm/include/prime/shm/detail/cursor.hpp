@@ -49,11 +49,13 @@ struct TakenBatch {
 // One subscriber slot's cursor over a topic.
 //
 // A taken sample's chunk is kept from reuse by the subscriber's bit in its
-// holders word (a hold), checked against the chunk's sequence. A batch of
-// views on a `block` topic needs none: the publisher overwrites no sample
-// a subscriber it waits for has not passed, and the cursor the publisher
-// sees stays at the first sample of the oldest such batch still out. Taking
-// one then writes nothing in shared memory, per sample or per batch.
+// holders word (a hold), checked against the ring: the hold counts if the
+// ring entry that named the chunk still does (Writer::evict says why). A
+// batch of views on a `block` topic needs none: the publisher overwrites no
+// sample a subscriber it waits for has not passed, and the cursor the
+// publisher sees stays at the first sample of the oldest such batch still
+// out. Taking one then writes nothing in shared memory, per sample or per
+// batch.
 // - A subscriber joining, or waited for again after the publisher passed
 //   it over, is covered so from the head it sees after its cursor is
 //   stored (see Writer::slowest for why).
@@ -154,7 +156,7 @@ class Cursor {
         auto& chunk = topic_->chunk(index);
         __builtin_prefetch(topic_->payload(index));  // arrives while the hold is taken
         chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
-        if (chunk.seq.load(std::memory_order_seq_cst) == next_) {
+        if (topic_->ring(next_).load(std::memory_order_seq_cst) == entry) {
           // No view of it is out: its hold was released before the
           // publisher could publish it again, so no other thread touches
           // its count now.
@@ -224,7 +226,7 @@ class Cursor {
       for (std::size_t i = 0; i < b.chunks.size(); ++i) {
         auto& chunk = places.chunk(b.chunks[i]);
         chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
-        if (chunk.seq.load(std::memory_order_seq_cst) != next_ + i) {
+        if (places.ring(next_ + i).load(std::memory_order_seq_cst) != RingEntry::pack(next_ + i, b.chunks[i])) {
           chunk.holders.fetch_and(~bit_);
           b.chunks.resize(i);  // later ones are not held yet
           break;
@@ -271,7 +273,7 @@ class Cursor {
     for (auto i = first; i < out.size(); ++i) {
       auto& chunk = places.chunk(out[i].chunk);
       chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
-      if (chunk.seq.load(std::memory_order_seq_cst) != out[i].seq) {
+      if (places.ring(out[i].seq).load(std::memory_order_seq_cst) != RingEntry::pack(out[i].seq, out[i].chunk)) {
         chunk.holders.fetch_and(~bit_);
         out.resize(i);  // later ones are not held yet
         break;

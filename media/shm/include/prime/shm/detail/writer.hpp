@@ -162,24 +162,21 @@ class Writer {
 
   // Publishes loaned chunks of `size` bytes each as the next sequences, in
   // order, chunk i stamped stamp_of(i). Never waits. As publish() does, for
-  // all at once: every header, then the ring entries one after another (a
-  // subscriber polling the ring fetches its line once for several samples,
-  // not once for each), the chunks they push out, then the head and one wake.
+  // all at once: every size and stamp, then the ring entries one after
+  // another (a subscriber polling the ring fetches its line once for several
+  // samples, not once for each), the head and one wake, then the chunks
+  // they pushed out.
   template <class StampOf>
   void publish_some(std::span<const std::uint32_t> chunks, std::size_t size, StampOf&& stamp_of) noexcept {
     const auto places = topic_->places();
     const auto first = next_;
     out_ -= chunks.size();
-    for (std::size_t i = 0; i < chunks.size(); ++i) {
-      auto& c = places.chunk(chunks[i]);
-      describe(c, places.info(first + i), size, stamp_of(i));
-      c.seq.store(first + i, std::memory_order_release);
-      to_ring(c);
-    }
+    for (std::size_t i = 0; i < chunks.size(); ++i)
+      describe(places.chunk(chunks[i]), places.info(first + i), size, stamp_of(i));
     for (std::size_t i = 0; i < chunks.size(); ++i)
       places.ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     // The chunks these entries push out of the ring, and those still leaving
-    // from before: their samples cleared before the head, evicted after it.
+    // from before: evicted after the head.
     std::size_t leaving = 0;
     while (const auto old = leaving_.pop()) batch_leaving_[leaving++] = *old;
     for (std::size_t i = 0; i < chunks.size(); ++i)
@@ -187,8 +184,6 @@ class Writer {
         batch_leaving_[leaving++] = old;
         prefetch_for_write(&places.chunk(old));
       }
-    for (std::size_t k = 0; k < leaving; ++k)
-      places.chunk(batch_leaving_[k]).seq.store(kNotPublished, std::memory_order_relaxed);
     next_ = first + chunks.size();
     const bool full = fences_fully();
     store_head(next_, full);
@@ -207,20 +202,15 @@ class Writer {
   // sleepers), so a subscriber that sees the head finds the entry, and a
   // publisher killed in between leaves a head no later than the ring (see
   // recover). Then the chunk the entry pushed out of the ring is let go:
-  // after a full head store, evicted at once, as a batch's are (its
-  // sequence cleared before the store, whose fence serves the eviction);
-  // after a light one, with others later (leave).
+  // after a full head store, evicted at once, as a batch's are (the store's
+  // fence serves the eviction); after a light one, with others later (leave).
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
-    auto& c = topic_->chunk(chunk);
     const auto seq = next_++;
     --out_;
-    describe(c, topic_->info(seq), size, stamp);
-    c.seq.store(seq, std::memory_order_release);
-    to_ring(c);
+    describe(topic_->chunk(chunk), topic_->info(seq), size, stamp);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
     const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk);
     const bool full = fences_fully();
-    if (full && old != kNoChunk) topic_->chunk(old).seq.store(kNotPublished, std::memory_order_relaxed);
     store_head(seq + 1, full);
     if (old != kNoChunk) {
       if (full) {
@@ -282,13 +272,7 @@ class Writer {
   }
 
   // This publisher's hold on a chunk (a loan's, or a spare's) ends.
-  void let_go(std::uint32_t chunk) noexcept { topic_->chunk(chunk).holders.fetch_and(~kLoanBit); }
-
-  // A loaned chunk passes from the loan to the ring. No subscriber holds it
-  // (it was free, or left the ring unheld, when it was loaned), so a plain
-  // store does: a bit a subscriber sets meanwhile is one it takes back at
-  // once, as the chunk does not carry the sequence it looked for.
-  static void to_ring(ChunkHeader& c) noexcept { c.holders.store(kRingBit, std::memory_order_release); }
+  void let_go(std::uint32_t chunk) noexcept { topic_->chunk(chunk).holders.fetch_and(~kPublisherBit); }
 
   // Keeps a few chunks claimed ahead of the loans (those leaving the ring
   // count: they become spares when evicted), and their lines on their way
@@ -325,9 +309,8 @@ class Writer {
   // stored on the line a subscriber polls among them. So it is one such
   // wait per kLeavingMax samples, not per sample (a batch has one fence for
   // all, a full publish() its head store's).
-  // Until evicted, a chunk keeps its sequence and the ring's bit: a
-  // subscriber that looked it up in the ring before it was replaced may
-  // still take it.
+  // Until evicted, a chunk stays this publisher's: a subscriber that holds
+  // it meanwhile finds the ring naming another, and lets go.
   void leave(std::uint32_t old) noexcept {
     leaving_.push(old);
     prefetch_for_write(&topic_->chunk(old));
@@ -337,38 +320,35 @@ class Writer {
     while (auto old = leaving_.pop()) evict(*old, false);
   }
 
-  // A chunk pushed out of the ring. If no subscriber holds it, it goes from
-  // the ring straight to this publisher's spare loans, else the last
-  // subscriber to let it go frees it. A subscriber holds a chunk by setting
-  // its bit (seq_cst), then checking the chunk's sequence; so the eviction
-  // clears the sequence, then either
-  // - (not `fenced`) takes the chunk by a read-modify-write of its holders:
-  //   a hold that lands after it finds the sequence cleared; or
-  // - (`fenced`: cleared before the head of a batch or full publish, fenced
-  //   after it) looks at the holders and takes the chunk with a plain
-  //   store, no read-modify-write per sample. That is Dekker's: either the
-  //   look sees the bit, or the subscriber sees the sequence cleared, takes
-  //   its bit back and reads nothing, so a bit the store wipes is one its
-  //   owner clears anyway (as are a dead subscriber's, by whoever reclaims
-  //   them). A batch that a subscriber's cursor kept, and later holds
-  //   without a check (Cursor::hold), never lies in a chunk leaving the
-  //   ring: the publisher waits for that cursor, or held the batch's chunks
-  //   for the subscriber when it stopped waiting.
+  // A chunk pushed out of the ring. If no subscriber holds it, it stays
+  // this publisher's, as a spare for the next loans (nothing written), else
+  // the last subscriber to let it go frees it. A subscriber holds a chunk by
+  // setting its bit (seq_cst), then checking that the ring entry still names
+  // it; so the eviction looks at the holders after the entry that replaced
+  // it, ordered by
+  // - (not `fenced`) a read-modify-write of the holders; or
+  // - (`fenced`: the entry stored before the head of a batch or full
+  //   publish, fenced after it) that fence, so a plain load does, no
+  //   read-modify-write per sample.
+  // That is Dekker's: either the look sees the bit, or the subscriber finds
+  // the entry replaced, takes its bit back and reads nothing. A batch that
+  // a subscriber's cursor kept, and later holds without a check
+  // (Cursor::hold), never lies in a chunk leaving the ring: the publisher
+  // waits for that cursor, or held the batch's chunks for the subscriber
+  // when it stopped waiting.
   // A light publisher, one at a time, evicts by read-modify-writes per
   // kLeavingMax samples: measured faster than a fence for them.
   void evict(std::uint32_t old, bool fenced) noexcept {
     auto& dropped = topic_->chunk(old);
-    if (!fenced) dropped.seq.store(kNotPublished, std::memory_order_relaxed);
     if (!spare_.full()) {
-      auto only_ring = kRingBit;
-      if (fenced ? dropped.holders.load(std::memory_order_acquire) == kRingBit
-                 : dropped.holders.compare_exchange_strong(only_ring, kLoanBit, std::memory_order_acq_rel)) {
-        if (fenced) dropped.holders.store(kLoanBit, std::memory_order_relaxed);
+      const auto holders = fenced ? dropped.holders.load(std::memory_order_acquire)
+                                  : dropped.holders.fetch_or(0, std::memory_order_seq_cst);
+      if (holders == kPublisherBit) {
         keep_spare(old);
         return;
       }
     }
-    dropped.holders.fetch_and(~kRingBit, std::memory_order_acq_rel);
+    dropped.holders.fetch_and(~kPublisherBit, std::memory_order_acq_rel);
   }
 
   // A chunk now held by this publisher: the spare one kept longest, else a free one.
@@ -387,7 +367,7 @@ class Writer {
       const auto i = static_cast<std::uint32_t>(search_++ % count);
       auto& holders = topic_->chunk(i).holders;
       std::uint64_t free = 0;
-      if (holders.load(std::memory_order_relaxed) == 0 && holders.compare_exchange_strong(free, kLoanBit)) return i;
+      if (holders.load(std::memory_order_relaxed) == 0 && holders.compare_exchange_strong(free, kPublisherBit)) return i;
     }
     return std::nullopt;
   }
@@ -495,29 +475,27 @@ class Writer {
     min_cursor_ = std::min(slowest(), next_);
   }
 
-  // After a publisher died: its loans are freed, each chunk the ring names
-  // holds the ring's bit (whatever step of a publish it died in), and the
-  // topic goes on after the last sequence that reached the ring.
+  // After a publisher died: the chunks the ring names are this one's, the
+  // rest (its loans and spares) freed, whatever step of a publish it died
+  // in; and the topic goes on after the last sequence that reached the ring.
   void recover() {
     auto& h = topic_->header();
     const auto& g = topic_->geometry();
     std::vector<bool> in_ring(g.chunk_count(), false);
-    auto last = h.head.load();
+    const auto head = h.head.load();
+    auto last = head;
     for (std::uint64_t i = 0; i < g.capacity; ++i) {
-      const auto c = RingEntry::chunk(topic_->ring(i).load());
-      if (c >= g.chunk_count()) continue;
-      in_ring[c] = true;
-      if (const auto seq = topic_->chunk(c).seq.load(); seq != kNotPublished) last = std::max(last, seq + 1);
+      const auto entry = topic_->ring(i).load();
+      if (!topic_->places().names_chunk(entry)) continue;
+      in_ring[RingEntry::chunk(entry)] = true;
+      // An entry stored after the last head store (at most a batch on).
+      if (const auto ahead = RingEntry::ahead(entry, head); ahead >= 0)
+        last = std::max(last, head + static_cast<std::uint64_t>(ahead) + 1);
     }
     for (std::uint32_t c = 0; c < g.chunk_count(); ++c) {
       auto& chunk = topic_->chunk(c);
-      if (in_ring[c]) {
-        chunk.holders.fetch_or(kRingBit);
-        chunk.holders.fetch_and(~kLoanBit);
-      } else {
-        chunk.seq.store(kNotPublished);
-        chunk.holders.fetch_and(~(kRingBit | kLoanBit));
-      }
+      if (in_ring[c]) chunk.holders.fetch_or(kPublisherBit);
+      else chunk.holders.fetch_and(~kPublisherBit);
     }
     h.head.store(last);
     // A subscriber it died setting holds for sorts out the ones it set.
@@ -559,7 +537,7 @@ class Writer {
   static constexpr std::size_t kAhead = 4;
   static constexpr std::size_t kInfosPerLine = kPayloadAlignment / sizeof(SampleInfo);  // a line of them
   static constexpr std::size_t kLeavingMax = 8;
-  // Chunks this publisher holds by its loan bit for the next loans: claimed
+  // Chunks this publisher holds by its bit for the next loans: claimed
   // ahead, or taken over as they left the ring. Bounded, so a publisher that
   // loans one at a time after a batch does not sit on many.
   Fifo<64> spare_;
