@@ -32,10 +32,9 @@
 // - SpscInline: 128-byte slots, the header on the line before the payload.
 // - SpscRecords: 32-byte records (sequence, size, stamp), two to a line, in
 //   an array of their own beside the 64-byte payload slots.
-// - SpscRecordsHeaders: the same, and a chunk header (layout.hpp's
-//   ChunkHeader: its size and stamp) written for each message on a line of
-//   its own, as Shm's publisher writes one so that a reader may hold a
-//   sample past its place in the ring.
+// - SpscRecordsHeaders: the same, and a 32-byte header (who holds it,
+//   sequence, size, stamp) written for each message on a line of its own,
+//   as Shm's publisher wrote one in each chunk up to layout 11.
 // - SpscShmLayout: Shm's own layout, from its TopicGeometry (layout.hpp): a
 //   ring of entries naming chunks, the sizes and stamps beside it, and
 //   chunks of a 128-byte header block and a payload block, taken in turn
@@ -145,7 +144,13 @@ struct Records {
   };
   Record records[kDepth]{};
   alignas(4096) Payload payloads[kDepth]{};  // a page apart, as Shm's infos and chunks
-  alignas(4096) layout::ChunkHeader headers[kHeaders ? kDepth : 1]{};
+  struct alignas(64) Header {
+    std::atomic<std::uint64_t> holders;
+    std::atomic<std::uint64_t> seq;
+    std::uint64_t size;
+    std::int64_t stamp;
+  };
+  alignas(4096) Header headers[kHeaders ? kDepth : 1]{};
 
   void write(std::uint64_t seq) noexcept {
     const auto i = (seq - 1) % kDepth;
@@ -154,6 +159,8 @@ struct Records {
       auto& header = headers[i];
       header.size = kPayload;
       header.stamp = static_cast<std::int64_t>(seq);
+      header.seq.store(seq, std::memory_order_release);
+      header.holders.store(1, std::memory_order_release);
     }
     records[i].size = kPayload;
     records[i].stamp = static_cast<std::int64_t>(seq);
@@ -186,16 +193,13 @@ struct ShmLayout {
   }
   std::byte* chunk(std::uint32_t c) noexcept { return segment + kGeometry.chunks_offset() + c * kGeometry.chunk_stride(); }
 
-  // As Writer::publish_some: the payload, the chunk's header, the info,
-  // then the ring entry. Chunks are taken in turn, as they come back to a
-  // publisher whose subscriber keeps up.
+  // As Writer::publish_some: the payload, the info, then the ring entry.
+  // Chunks are taken in turn, as they come back to a publisher whose
+  // subscriber keeps up.
   void write(std::uint64_t seq) noexcept {
     const auto c = static_cast<std::uint32_t>(seq % kGeometry.chunk_count());
     write_payload(chunk(c) + layout::kPayloadOffset, seq);
-    auto& header = *std::launder(reinterpret_cast<layout::ChunkHeader*>(chunk(c)));
-    header.size = kPayload;
-    header.stamp = static_cast<std::int64_t>(seq);
-    info(seq).size.store(kPayload, std::memory_order_release);
+    info(seq).word.store(layout::SampleInfo::pack(seq, kPayload), std::memory_order_release);
     info(seq).stamp.store(static_cast<std::int64_t>(seq), std::memory_order_release);
     ring(seq).store(layout::RingEntry::pack(seq, c), std::memory_order_release);
   }
@@ -206,7 +210,7 @@ struct ShmLayout {
   // beside it, the payload.
   [[nodiscard]] std::uint64_t read(std::uint64_t seq) noexcept {
     const auto c = layout::RingEntry::chunk(ring(seq).load(std::memory_order_relaxed));
-    if (c >= kGeometry.chunk_count() || info(seq).size.load(std::memory_order_acquire) != kPayload) return 0;
+    if (c >= kGeometry.chunk_count() || info(seq).word.load(std::memory_order_acquire) != layout::SampleInfo::pack(seq, kPayload)) return 0;
     return ipc::seq_of(chunk(c) + layout::kPayloadOffset);
   }
 };

@@ -446,6 +446,39 @@ TEST_F(ShmTest, AHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheSegment) {
       << ninth.error().describe();
 }
 
+// A sample whose size and stamp beside the ring belong to another sequence
+// (the publisher is writing the next lap's there: a reader it passed over
+// meets this) is lost, not read with another sample's size and stamp, by
+// a reader of views and a reader of batches alike.
+TEST_F(ShmTest, ASampleWhoseInfoIsAnotherLapsIsLostNotMisread) {
+  const shm::TopicQos qos{.capacity = 8, .max_message_size = 64};
+  auto publisher = core.publisher<shm::Bytes>("lap", qos);
+  auto reader = core.subscribe<shm::Bytes>("lap", {}, qos).subscribe();
+  auto batches = core.subscribe<shm::Bytes>("lap", {}, qos).batches();
+  const std::vector<std::byte> ten(10, std::byte{7});
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(publisher.publish(std::span<const std::byte>{ten}));
+  const MappedTopic mapped{core.domain(), "lap"};
+  const auto info = mapped.info(1).word.load();
+  mapped.info(1).word.store(shm::detail::SampleInfo::pack(1 + 8, 20));  // sequence 9's, a lap on
+
+  auto first = reader.try_read();
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->value.sequence(), 0u);
+  auto third = reader.try_read();
+  ASSERT_TRUE(third);
+  EXPECT_EQ(third->value.sequence(), 2u) << "sequence 1 is lost";
+  EXPECT_EQ(third->value.bytes().size(), 10u);
+  EXPECT_EQ(reader.lost(), 1u);
+
+  const auto before = batches.try_read(8);
+  ASSERT_EQ(before.size(), 1u) << "a batch ends before the sample";
+  const auto after = batches.try_read(8);
+  ASSERT_EQ(after.size(), 1u);
+  EXPECT_EQ(after.sequence(0), 2u);
+  EXPECT_EQ(after.bytes(0).size(), 10u);
+  mapped.info(1).word.store(info);
+}
+
 // A ring entry naming a chunk the topic does not have, or a size larger
 // than its messages may be (written by a foreign or broken program), is
 // not followed out of the segment: the sample is lost, or its bytes end at
@@ -461,8 +494,7 @@ TEST_F(ShmTest, ASampleDamagedInSharedMemoryIsLostOrCutNotReadOutOfTheSegment) {
   const MappedTopic mapped{core.domain(), "raw"};
   const auto entry = mapped.ring(1).load();
   mapped.ring(1).store(shm::detail::RingEntry::pack(1, shm::detail::kNoChunk - 1));  // 2 GiB past the chunks
-  mapped.chunk(shm::detail::RingEntry::chunk(mapped.ring(2).load())).size = 1ull << 40;
-  mapped.info(2).size.store(1ull << 40);
+  mapped.info(2).word.store(shm::detail::SampleInfo::pack(2, shm::detail::SampleInfo::kSizeMask));  // 1 TiB
   mapped.header().max_message_size = 1ull << 40;
 
   auto oversized = publisher.loan(65);

@@ -52,7 +52,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     auto taken = subscriber_->cursor().try_take();
     if (!taken) return std::nullopt;
     budget_reported_ = false;
-    return sample(View<T>{subscriber_.get(), taken->chunk, taken->seq});
+    return sample(View<T>{subscriber_.get(), *taken});
   }
 
   std::expected<Sample<View<T>>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
@@ -76,7 +76,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       taken_.reserve(std::min(max, room));
       const auto n = subscriber_->cursor().take_some(std::min(max, room), taken_);
       subscriber_->hold_taken(taken_);
-      for (const auto& t : taken_) out.push_back(sample(View<T>{subscriber_.get(), t.chunk, t.seq, typename View<T>::Held{}}));
+      for (const auto& t : taken_) out.push_back(sample(View<T>{subscriber_.get(), t, typename View<T>::Held{}}));
       if (n > 0) {
         budget_reported_ = false;
         return n;

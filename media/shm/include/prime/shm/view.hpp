@@ -30,14 +30,16 @@ class SubscriptionReader;
 template <Message T>
 class View {
  public:
-  View(const View& other) noexcept : owner_{other.owner_}, chunk_{other.chunk_}, seq_{other.seq_} {
+  View(const View& other) noexcept : owner_{other.owner_}, chunk_{other.chunk_}, seq_{other.seq_}, info_{other.info_} {
     if (owner_) owner_->hold_again(chunk_);
   }
-  View(View&& other) noexcept : owner_{std::exchange(other.owner_, nullptr)}, chunk_{other.chunk_}, seq_{other.seq_} {}
+  View(View&& other) noexcept
+      : owner_{std::exchange(other.owner_, nullptr)}, chunk_{other.chunk_}, seq_{other.seq_}, info_{other.info_} {}
   View& operator=(View other) noexcept {
     std::swap(owner_, other.owner_);
     std::swap(chunk_, other.chunk_);
     std::swap(seq_, other.seq_);
+    std::swap(info_, other.info_);
     return *this;
   }
   ~View() {
@@ -53,13 +55,13 @@ class View {
 
   // The bytes of a raw byte topic's message.
   [[nodiscard]] std::span<const std::byte> bytes() const noexcept {
-    return {owner_->topic().payload(chunk_), owner_->topic().places().size(owner_->topic().chunk(chunk_).size)};
+    return {owner_->topic().payload(chunk_), info_.size};
   }
   // Its place in the topic: 0 for the first sample ever published.
   [[nodiscard]] std::uint64_t sequence() const noexcept { return seq_; }
   // When the publisher says it was taken (the sensor's stamp, or when it was published).
   [[nodiscard]] Clock::time_point stamp() const noexcept {
-    return Clock::time_point{Clock::duration{owner_->topic().chunk(chunk_).stamp}};
+    return Clock::time_point{Clock::duration{info_.stamp}};
   }
 
   friend bool operator==(const View& a, const T& b) requires(!std::is_same_v<T, Bytes>) && std::equality_comparable<T>
@@ -75,17 +77,19 @@ class View {
   template <Message>
   friend class SubscriptionReader;
   // A sample just taken by `owner`.
-  View(detail::Subscriber* owner, std::uint32_t chunk, std::uint64_t seq) : owner_{owner}, chunk_{chunk}, seq_{seq} {
+  View(detail::Subscriber* owner, const detail::Taken& taken)
+      : owner_{owner}, chunk_{taken.chunk}, seq_{taken.seq}, info_{taken.info} {
     owner_->hold_taken(chunk_);
   }
   // One of several samples taken together, held already (Subscriber::hold_taken for them all).
   struct Held {};
-  View(detail::Subscriber* owner, std::uint32_t chunk, std::uint64_t seq, Held) noexcept
-      : owner_{owner}, chunk_{chunk}, seq_{seq} {}
+  View(detail::Subscriber* owner, const detail::Taken& taken, Held) noexcept
+      : owner_{owner}, chunk_{taken.chunk}, seq_{taken.seq}, info_{taken.info} {}
 
   detail::Subscriber* owner_;  // kept alive by the chunk this view holds
   std::uint32_t chunk_;
   std::uint64_t seq_;
+  detail::TakenInfo info_;  // its size and stamp, as read when taken
 };
 
 }  // namespace prime::shm

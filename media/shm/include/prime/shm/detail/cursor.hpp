@@ -19,18 +19,30 @@
 
 namespace prime::shm::detail {
 
-// A sample taken by a subscriber: its chunk, held by the subscriber's bit
-// until released.
-struct Taken {
-  std::uint32_t chunk;
-  std::uint64_t seq;
-};
-
 // A sample's size and stamp, as read when it was taken.
 struct TakenInfo {
   std::uint64_t size;
   std::int64_t stamp;
 };
+
+// A sample taken by a subscriber: its chunk, held by the subscriber's bit
+// until released.
+struct Taken {
+  std::uint32_t chunk;
+  std::uint64_t seq;
+  TakenInfo info;
+};
+
+// Sample `seq`'s size and stamp, read beside the ring as SampleInfo says;
+// none when they are not its own (the publisher is overwriting them: the
+// sample is lost).
+inline std::optional<TakenInfo> info_of(const Places& places, std::uint64_t seq) noexcept {
+  const auto& info = places.info(seq);
+  const auto word = info.word.load(std::memory_order_acquire);
+  const auto stamp = info.stamp.load(std::memory_order_acquire);
+  if (info.word.load(std::memory_order_acquire) != word || !SampleInfo::names(word, seq)) return std::nullopt;
+  return TakenInfo{places.size(SampleInfo::size_of(word)), stamp};
+}
 
 // Samples taken together for a batch of views (shm::Views): consecutive
 // sequences from `first`, let go of together.
@@ -155,13 +167,14 @@ class Cursor {
         const auto index = RingEntry::chunk(entry);
         auto& chunk = topic_->chunk(index);
         __builtin_prefetch(topic_->payload(index));  // arrives while the hold is taken
+        const auto info = info_of(topic_->places(), next_);  // before the hold's check (SampleInfo)
         chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
-        if (topic_->ring(next_).load(std::memory_order_seq_cst) == entry) {
+        if (info && topic_->ring(next_).load(std::memory_order_seq_cst) == entry) {
           // No view of it is out: its hold was released before the
           // publisher could publish it again, so no other thread touches
           // its count now.
           views_[index].store(1, std::memory_order_relaxed);
-          const Taken taken{index, next_};
+          const Taken taken{index, next_, *info};
           advance(next_ + 1);
           prefetch_next();
           return taken;
@@ -188,10 +201,9 @@ class Cursor {
     free_.pop_back();  // before anything retires more
     const auto places = topic_->places();
     while (true) {
-      // A batch the cursor may keep reads its samples' sizes and stamps
-      // beside the ring, before the look at `lagging` that decides whether
-      // it is kept (SampleInfo says why that order); a held one, in each
-      // chunk once it is held.
+      // Each sample's size and stamp are read beside the ring: before the
+      // look at `lagging` that decides whether the cursor keeps the batch,
+      // and before a hold's check (SampleInfo says why those orders).
       const bool may_keep = may_cover(next_);
       for (auto seq = next_; seq - next_ < max; ++seq) {
         const auto entry = places.ring(seq).load(std::memory_order_acquire);
@@ -205,15 +217,13 @@ class Cursor {
           }
           break;
         }
+        const auto info = info_of(places, seq);
+        if (!info) break;  // being overwritten
         const auto chunk = RingEntry::chunk(entry);
         __builtin_prefetch(places.payload(chunk));
+        if (!may_keep) prefetch_for_write(&places.chunk(chunk));  // for the hold
         b.chunks.push_back(chunk);
-        if (may_keep) {
-          const auto& info = places.info(seq);
-          b.info.push_back({places.size(info.size.load(std::memory_order_acquire)), info.stamp.load(std::memory_order_acquire)});
-        } else {
-          prefetch_for_write(&places.chunk(chunk));  // for the hold
-        }
+        b.info.push_back(*info);
       }
       if (b.chunks.empty()) {
         skip_overwritten();
@@ -222,16 +232,15 @@ class Cursor {
       if (may_keep) keep_within_reach(next_ + b.chunks.size(), held);
       b.held = !covers(next_);  // after the ring entries' and infos' loads, and kept_end's store
       if (!b.held) break;
-      b.info.clear();
       for (std::size_t i = 0; i < b.chunks.size(); ++i) {
         auto& chunk = places.chunk(b.chunks[i]);
         chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
         if (places.ring(next_ + i).load(std::memory_order_seq_cst) != RingEntry::pack(next_ + i, b.chunks[i])) {
           chunk.holders.fetch_and(~bit_);
           b.chunks.resize(i);  // later ones are not held yet
+          b.info.resize(i);
           break;
         }
-        b.info.push_back({places.size(chunk.size), chunk.stamp});
       }
       if (!b.chunks.empty()) break;
       skip_overwritten();
@@ -253,10 +262,10 @@ class Cursor {
   // them all; how many. A sample overwritten before it was taken ends the
   // batch, and the next take skips what was lost.
   //
-  // In two passes: the ring entries of what is out first, each chunk's
-  // header line fetched for writing and its payload for reading as it is
-  // found, then the holds. So the lines travel from the publisher together,
-  // not one after another, each hold waiting for its own.
+  // In two passes: the ring entries of what is out first, with their sizes
+  // and stamps, each chunk's header line fetched for writing and its
+  // payload for reading as it is found, then the holds. So the lines travel
+  // together, not one after another, each hold waiting for its own.
   std::size_t take_some(std::size_t max, std::vector<Taken>& out) {
     if (max == 0) return 0;
     retire_ended();
@@ -265,10 +274,12 @@ class Cursor {
     for (auto seq = next_; seq - next_ < max; ++seq) {
       const auto entry = places.ring(seq).load(std::memory_order_acquire);
       if (RingEntry::ahead(entry, seq) != 0 || !places.names_chunk(entry)) break;
+      const auto info = info_of(places, seq);  // before the hold's check (SampleInfo)
+      if (!info) break;
       const auto index = RingEntry::chunk(entry);
       prefetch_for_write(&places.chunk(index));
       __builtin_prefetch(places.payload(index));
-      out.push_back({index, seq});
+      out.push_back({index, seq, *info});
     }
     for (auto i = first; i < out.size(); ++i) {
       auto& chunk = places.chunk(out[i].chunk);

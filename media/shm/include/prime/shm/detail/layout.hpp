@@ -28,11 +28,15 @@ namespace prime::shm::detail {
 //
 // A chunk carries a sample for as long as a ring entry names the two: a
 // subscriber holds a chunk by setting its bit, then checks that the entry
-// still names it. The publisher writes nothing in a chunk's header to pass
-// it from a loan to the ring and back to its spares (measured on an AMD
-// EPYC, 64-byte messages: batches of views across processes 1.3x, the
-// publisher alone 1.2x faster than with a sequence in each chunk and a bit
-// each for the ring and the loan).
+// still names it. A sample's size and stamp lie beside its ring entry
+// (SampleInfo), not in its chunk. So a publish writes the payload, the
+// info and the ring entry, and (below a page: see Writer::describe)
+// nothing in the chunk's header, which subscribers holding it write.
+// Measured on an AMD EPYC against layout 9 (a sequence, size and stamp in
+// each chunk's header, written by each publish, and a bit each for the
+// ring and the loan), 64-byte messages in paired runs: batches of views
+// across processes about 1.2x as fast, the publisher alone 1.16x;
+// read_some batches within noise at 64 bytes and 1 MiB (0.9-1.0x).
 
 static_assert(std::atomic<std::uint64_t>::is_always_lock_free, "shared memory needs lock-free 64-bit atomics");
 static_assert(std::atomic<std::uint32_t>::is_always_lock_free, "shared memory needs lock-free 32-bit atomics");
@@ -44,7 +48,7 @@ using ParticipantId = std::uint64_t;
 inline constexpr ParticipantId kReclaiming = ~0ull;  // a slot whose dead owner is being cleared
 
 inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;  // "PRIMESM4"
-inline constexpr std::uint32_t kLayoutVersion = 11;
+inline constexpr std::uint32_t kLayoutVersion = 12;
 // Room for a message type's description (prime::schema_of), for tools.
 inline constexpr std::size_t kSchemaCapacity = 2048;
 // Subscriber slots a topic may offer; one more is kept for tools that observe.
@@ -63,13 +67,14 @@ inline constexpr std::size_t kPageAlignment = 4096;
 // A chunk's header has a 128-byte block to itself, and its payload starts
 // at the next: a reader of the payload alone (a batch of views) then does
 // not have the adjacent-line prefetcher, which fetches lines in 128-byte
-// pairs, pull in the header the publisher writes for each sample, and the
-// publisher finds the header's line still its own (measured on an AMD
-// EPYC, 64-byte messages: batches of views 1.1x, read_some batches 1.4x
-// faster than with header and payload sharing a block; latency and views
-// at 1 MiB unchanged; read_some at 1 MiB about 0.9x, a held sample's header
-// and payload now two fetches, not one pair). Chunks are whole blocks, so
-// no payload shares one with the next chunk's header either.
+// pairs, pull in the header others write. Measured on an AMD EPYC with
+// layout 9, when each publish wrote the header, 64-byte messages: batches
+// of views 1.1x, read_some batches 1.4x faster than with header and
+// payload sharing a block; latency and views at 1 MiB unchanged; read_some
+// at 1 MiB about 0.9x, a held sample's header and payload being two
+// fetches, not one pair. Not measured again since a publish stopped
+// writing it. Chunks are whole blocks, so no payload shares one with the
+// next chunk's header either.
 inline constexpr std::size_t kChunkAlignment = 2 * kPayloadAlignment;
 inline constexpr std::size_t kPayloadOffset = kChunkAlignment;  // from a chunk's start
 inline constexpr std::uint64_t kPublisherSleeper = 1;  // the space doorbell's one sleeper
@@ -101,25 +106,38 @@ struct RingEntry {
 static_assert(RingEntry::kChunkBits + RingEntry::kSeqBits == 64);
 
 // A published sample's size and stamp, beside its ring entry (info[i] goes
-// with ring[i]), written before the entry. A batch reader that its cursor
-// keeps (Cursor::take_batch) reads them here, four samples to a line, and
-// not in the chunks' headers, which then stay in the publisher's cache.
-// Those keep their own copy: a reader holding a chunk reads it there, as
-// the ring may name another sample by then. Stored with release and loaded
-// with acquire: a value the publisher wrote after passing the reader over
+// with ring[i]), written before the entry: four samples to a line, which a
+// reader taking several reads once. The publisher rewrites them a lap on,
+// while a reader may be reading them (it may have been passed over, or hold
+// the chunk past its place in the ring), so they are read as a seqlock is:
+// `word` carries the sequence's low bits beside the size and is stored
+// before the stamp; a reader loads it, the stamp, and it again, and takes
+// the two only if the word is the same both times and names its sequence.
+// A reader whose check of the ring entry follows (a hold) then has them
+// from its own lap or the next, which the sequence's bits tell apart (the
+// ring is shorter than 2^24). Stored with release and loaded with acquire:
+// a value the publisher wrote after passing the reader over
 // (SubscriberSlot::lagging) comes with that news.
 struct SampleInfo {
-  std::atomic<std::uint64_t> size{0};
-  std::atomic<std::int64_t> stamp{0};
+  static constexpr int kSizeBits = 40;  // a message is smaller than 2^40 bytes (see damage)
+  static constexpr std::uint64_t kSizeMask = (1ull << kSizeBits) - 1;
+
+  std::atomic<std::uint64_t> word{0};  // (sequence mod 2^24) << 40 | size
+  std::atomic<std::int64_t> stamp{0};  // steady_clock ticks (CLOCK_MONOTONIC: one clock for every process)
+
+  static constexpr std::uint64_t pack(std::uint64_t seq, std::uint64_t size) noexcept {
+    return (seq << kSizeBits) | (size & kSizeMask);
+  }
+  static constexpr std::uint64_t size_of(std::uint64_t word) noexcept { return word & kSizeMask; }
+  static constexpr bool names(std::uint64_t word, std::uint64_t seq) noexcept {
+    return (word >> kSizeBits) == ((seq << kSizeBits) >> kSizeBits);
+  }
 };
 static_assert(sizeof(SampleInfo) == 16);
 
-// What a subscriber that holds a chunk reads of its sample besides the
-// payload, written before the ring entry that names it.
+// A chunk's header: who holds it.
 struct alignas(kPayloadAlignment) ChunkHeader {
   std::atomic<std::uint64_t> holders{0};
-  std::uint64_t size = 0;   // bytes of payload in use
-  std::int64_t stamp = 0;   // steady_clock ticks (CLOCK_MONOTONIC: one clock for every process)
 };
 static_assert(sizeof(ChunkHeader) <= kPayloadOffset, "a chunk's header lies before its payload");
 

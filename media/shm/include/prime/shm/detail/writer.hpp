@@ -172,7 +172,7 @@ class Writer {
     const auto first = next_;
     out_ -= chunks.size();
     for (std::size_t i = 0; i < chunks.size(); ++i)
-      describe(places.chunk(chunks[i]), places.info(first + i), size, stamp_of(i));
+      describe(places, chunks[i], first + i, size, stamp_of(i));
     for (std::size_t i = 0; i < chunks.size(); ++i)
       places.ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     // The chunks these entries push out of the ring, and those still leaving
@@ -182,7 +182,7 @@ class Writer {
     for (std::size_t i = 0; i < chunks.size(); ++i)
       if (const auto old = std::exchange(in_ring_[places.ring_index(first + i)], chunks[i]); old != kNoChunk) {
         batch_leaving_[leaving++] = old;
-        prefetch_for_write(&places.chunk(old));
+        __builtin_prefetch(&places.chunk(old));  // for evict's look at its holders
       }
     next_ = first + chunks.size();
     const bool full = fences_fully();
@@ -207,7 +207,7 @@ class Writer {
   void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept {
     const auto seq = next_++;
     --out_;
-    describe(topic_->chunk(chunk), topic_->info(seq), size, stamp);
+    describe(topic_->places(), chunk, seq, size, stamp);
     topic_->ring(seq).store(RingEntry::pack(seq, chunk), std::memory_order_release);
     const auto old = std::exchange(in_ring_[topic_->ring_index(seq)], chunk);
     const bool full = fences_fully();
@@ -225,15 +225,24 @@ class Writer {
   }
 
  private:
-  // Sample `seq`'s size and stamp: in its chunk, for readers that hold it,
-  // and beside its ring entry, for batch readers their cursor keeps
-  // (SampleInfo). Both before the ring entry.
-  static void describe(ChunkHeader& c, SampleInfo& info, std::size_t size, Clock::time_point stamp) noexcept {
-    const auto ticks = stamp.time_since_epoch().count();
-    c.size = size;
-    c.stamp = ticks;
-    info.size.store(size, std::memory_order_release);
-    info.stamp.store(ticks, std::memory_order_release);
+  // Sample `seq`'s size and stamp, beside its ring entry (SampleInfo says
+  // in which order), before the entry. A chunk a page or more long also has
+  // its header written, though it says nothing new: its holders, this
+  // publisher's alone (a bit a subscriber sets meanwhile is one it takes
+  // back at once: the ring no longer names the chunk for the sample it
+  // looked for). A
+  // subscriber that holds it then finds the line in this publisher's cache:
+  // measured at 1 MiB, read_some batches 1.2-1.6x faster (two series of
+  // paired runs) than with the line last written when the subscriber let go
+  // of the chunk's previous sample. Below a page the header is left alone:
+  // batches of views at 64 bytes about 1.2x faster than when each publish
+  // wrote it.
+  static void describe(const Places& places, std::uint32_t chunk, std::uint64_t seq, std::size_t size,
+                       Clock::time_point stamp) noexcept {
+    auto& info = places.info(seq);
+    info.word.store(SampleInfo::pack(seq, size), std::memory_order_release);
+    info.stamp.store(stamp.time_since_epoch().count(), std::memory_order_release);
+    if (places.stride >= kPageAlignment) places.chunk(chunk).holders.store(kPublisherBit, std::memory_order_relaxed);
   }
 
   // Whether the next head store fences fully: always, but for a light
@@ -296,9 +305,9 @@ class Writer {
     if (next_out != kNoChunk) prefetch_for_write(&topic_->chunk(next_out));
   }
 
+  // A spare's payload is on its way for writing (its header is not written).
   void keep_spare(std::uint32_t chunk) noexcept {
     spare_.push(chunk);
-    prefetch_for_write(&topic_->chunk(chunk));
     prefetch_for_write(topic_->payload(chunk));
   }
 
