@@ -230,13 +230,12 @@ class Writer {
   // its header written, though it says nothing new: its holders, this
   // publisher's alone (a bit a subscriber sets meanwhile is one it takes
   // back at once: the ring no longer names the chunk for the sample it
-  // looked for). A
-  // subscriber that holds it then finds the line in this publisher's cache:
-  // measured at 1 MiB, read_some batches 1.2-1.6x faster (two series of
-  // paired runs) than with the line last written when the subscriber let go
-  // of the chunk's previous sample. Below a page the header is left alone:
-  // batches of views at 64 bytes about 1.2x faster than when each publish
-  // wrote it.
+  // looked for). A subscriber that holds it then finds the line in this
+  // publisher's cache: measured at 1 MiB, read_some batches 1.2-1.6x
+  // faster (two series of paired runs) than with the line last written
+  // when the subscriber let go of the chunk's previous sample. Below a
+  // page the header is left alone: batches of views at 64 bytes about 1.2x
+  // faster than when each publish wrote it.
   static void describe(const Places& places, std::uint32_t chunk, std::uint64_t seq, std::size_t size,
                        Clock::time_point stamp) noexcept {
     auto& info = places.info(seq);
