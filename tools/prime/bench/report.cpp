@@ -408,7 +408,7 @@ std::string headline(const Results& r, const std::vector<Results>& rounds) {
   for (const auto& [who, what] : {std::pair{"SpscInline", "the header inline (128-byte slots)"},
                                   std::pair{"SpscRecords", "the header in 32-byte records beside the payload slots"},
                                   std::pair{"SpscRecordsHeaders", "those records and a chunk header written per message"},
-                                  std::pair{"SpscShmLayout", "Shm's layout (ring entry, info, chunk header)"}})
+                                  std::pair{"SpscShmLayout", "Shm's layout (ring entry, info, chunk)"}})
     row(std::string{"SPSC ring, 256 deep, read in batches, 64 B with "} + what + ", nothing else done",
         rate(who, "throughput", 64), true, {spsc});
   row("Shm publisher alone, in batches (one process, nobody reading: its own bookkeeping), 64 B",
@@ -533,10 +533,11 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
         "out four ways, read in batches as Shm's batch readers read (the entries of up to 32 messages out, then "
         "each message), nothing else done: SpscInline, 128-byte slots with the header on the line before the "
         "payload; SpscRecords, 32-byte records (sequence, size, stamp) in an array beside the payload slots; "
-        "SpscRecordsHeaders, the same and a chunk header (size, stamp) written for each message "
-        "on a line of its own, as Shm's publisher writes one so that a reader may hold a sample past its place in "
-        "the ring; SpscShmLayout, Shm's own segment layout (ring entries naming chunks, sizes and stamps beside "
-        "them, chunks of a header block and a payload block, taken in turn).\n\n"
+        "SpscRecordsHeaders, the same and a 32-byte header (holders, sequence, size, stamp) written for each "
+        "message on a line of its own, as Shm's publisher wrote one in each chunk up to layout 11; SpscShmLayout, "
+        "Shm's own segment layout (ring entries naming chunks, sizes and stamps beside them, chunks of a header "
+        "block and a payload block, taken in turn), written as a publish writes it: payload, size and stamp, "
+        "ring entry.\n\n"
      << "The headline's \"publisher alone\" rows run Shm's publishing side by itself, in one process, on the same "
         "topic with nobody reading: no cache line crosses cores, so their rate is the publisher's own bookkeeping, "
         "the most it could send to another process.\n\n";
