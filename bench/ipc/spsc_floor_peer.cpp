@@ -34,7 +34,7 @@
 //   an array of their own beside the 64-byte payload slots.
 // - SpscRecordsHeaders: the same, and a 32-byte header (who holds it,
 //   sequence, size, stamp) written for each message on a line of its own,
-//   as Shm's publisher wrote one in each chunk up to layout 11.
+//   as Shm's publisher wrote one in each chunk until layout 12.
 // - SpscShmLayout: Shm's own layout, from its TopicGeometry (layout.hpp): a
 //   ring of entries naming chunks, the sizes and stamps beside it, and
 //   chunks of a 128-byte header block and a payload block, taken in turn

@@ -534,7 +534,7 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
         "each message), nothing else done: SpscInline, 128-byte slots with the header on the line before the "
         "payload; SpscRecords, 32-byte records (sequence, size, stamp) in an array beside the payload slots; "
         "SpscRecordsHeaders, the same and a 32-byte header (holders, sequence, size, stamp) written for each "
-        "message on a line of its own, as Shm's publisher wrote one in each chunk up to layout 11; SpscShmLayout, "
+        "message on a line of its own, as Shm's publisher wrote one in each chunk until layout 12; SpscShmLayout, "
         "Shm's own segment layout (ring entries naming chunks, sizes and stamps beside them, chunks of a header "
         "block and a payload block, taken in turn), written as a publish writes it: payload, size and stamp, "
         "ring entry.\n\n"
