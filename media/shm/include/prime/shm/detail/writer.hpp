@@ -304,7 +304,8 @@ class Writer {
     if (next_out != kNoChunk) prefetch_for_write(&topic_->chunk(next_out));
   }
 
-  // A spare's payload is on its way for writing (its header is not written).
+  // A spare's payload is on its way for writing (its header is written, if
+  // at all, by describe at publish).
   void keep_spare(std::uint32_t chunk) noexcept {
     spare_.push(chunk);
     prefetch_for_write(topic_->payload(chunk));
