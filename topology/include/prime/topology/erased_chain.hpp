@@ -27,11 +27,23 @@ class Step {
   virtual Out operator()(In in) const = 0;
 };
 
+// A step that takes and gives one type also updates a value in place, so a
+// sequence of them moves the value into each block and back, no more.
+template <class T>
+class Step<T, T> {
+ public:
+  virtual ~Step() = default;
+  virtual T operator()(T in) const = 0;
+  virtual void update(T& value) const { value = (*this)(std::move(value)); }
+};
+
 template <class In, class Out, class F>
 class BlockStep final : public Step<In, Out> {
  public:
   explicit BlockStep(F block) : block_{std::move(block)} {}
   Out operator()(In in) const override { return std::invoke(block_, std::move(in)); }
+  // Step<T, T>::update, where In and Out are one type (never used otherwise).
+  void update(In& value) const { value = std::invoke(block_, std::move(value)); }
 
  private:
   F block_;
@@ -58,8 +70,11 @@ class SequenceStep final : public Step<T, T> {
 
   explicit SequenceStep(Steps steps) : steps_{std::move(steps)} {}
   T operator()(T value) const override {
-    for (const auto& step : steps_) value = (*step)(std::move(value));
+    update(value);
     return value;
+  }
+  void update(T& value) const override {
+    for (const auto& step : steps_) step->update(value);
   }
 
   // The steps of `step`, looking inside a sequence rather than nesting it.
