@@ -60,5 +60,15 @@ TEST(LibertyTest, AHopMovesItsMessageInOutAndBackOnly) {
   EXPECT_LE(Lifetime::moves, 3 * 100 + 3) << "per hop: in, out and back; and three to enter and leave the chain";
 }
 
+// A message that cannot be assigned still links, step after step.
+TEST(LibertyTest, AMessageThatCannotBeAssignedStillLinks) {
+  struct Fixed {
+    const int value;
+  };
+  liberty::Core core;
+  auto one = core.chain([](Fixed m) { return Fixed{m.value + 1}; });
+  EXPECT_EQ((one | one | one)(Fixed{1}).value, 4);
+}
+
 }  // namespace
 }  // namespace prime::test

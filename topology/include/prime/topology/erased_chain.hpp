@@ -30,6 +30,7 @@ class Step {
 // A step that takes and gives one type also updates a value in place, so a
 // sequence of them moves the value into each block and back, no more.
 template <class T>
+  requires std::is_move_assignable_v<T>
 class Step<T, T> {
  public:
   virtual ~Step() = default;
