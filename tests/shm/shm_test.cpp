@@ -139,6 +139,30 @@ TEST_F(ShmTest, LatestNeedsOneSampleOfTheBudgetAndSkipsToTheNewest) {
   EXPECT_EQ(reader.lost(), 0u) << "skipped to the newest: read past, not lost";
 }
 
+// A collector's chain may still read the value latest() gave it (a copy of
+// the reader's) when the next call asks for the newest: at a budget of one,
+// letting go of the reader's copy then frees nothing, so it keeps the value
+// it has rather than losing it and finding nothing.
+TEST_F(ShmTest, LatestKeepsItsValueWhileACopyOfItLivesAtTheBudget) {
+  const shm::TopicQos qos{.capacity = 8, .max_held = 1};
+  auto publisher = core.publisher<int>("pose2", qos);
+  auto reader = core.subscribe<int>("pose2", {}, qos).subscribe();
+  ASSERT_TRUE(publisher.publish(1));
+  auto in_use = reader.latest();  // a chain still reading it
+  ASSERT_TRUE(in_use);
+  ASSERT_TRUE(publisher.publish(2));
+  auto kept = reader.latest();
+  ASSERT_TRUE(kept) << "the value it had, not nothing";
+  EXPECT_EQ(*kept->value, 1);
+  EXPECT_EQ(*in_use->value, 1) << "and the copy out is intact";
+  in_use.reset();
+  kept.reset();
+  auto newest = reader.latest();
+  ASSERT_TRUE(newest) << "once the copies are gone, the newest";
+  EXPECT_EQ(*newest->value, 2);
+  EXPECT_EQ(reader.lost(), 0u);
+}
+
 TEST_F(ShmTest, ALateJoinerGetsTheHistoryItAsksFor) {
   const shm::TopicQos qos{.capacity = 8};
   auto publisher = core.publisher<int>("map", qos);

@@ -35,16 +35,20 @@ enum class PublishFence {
 // (Errc::qos_mismatch), whichever side started first. Keep one constant per
 // topic and use it at both ends.
 //
-// A topic takes  ring + (capacity + max_subscribers × max_held + 2) ×
-// round_up(64 + max_message_size, 64)  bytes of /dev/shm, all reserved when
-// it is created; shm::topic_memory<T>(qos) computes it.
+// A topic takes about  (capacity + max_subscribers × max_held + 2) ×
+// round_up(128 + max_message_size, 128)  bytes of /dev/shm (each chunk's
+// header block and its payload), plus a 6.5 KiB header and 24 bytes per
+// ring entry, each part from a page, all reserved when it is created;
+// shm::topic_memory<T>(qos) computes it.
 struct TopicQos {
   std::size_t capacity = 64;  // samples a subscriber may fall behind (and history it may ask for)
   // Largest message in bytes; 0 means sizeof(T). Raw byte topics must set it.
   std::size_t max_message_size = 0;
   Overflow overflow = Overflow::drop_oldest;
   // The publisher's (not compared between the two sides): how long a `block`
-  // publisher waits for a subscriber that reads nothing. Past it, that
+  // publisher waits for a subscriber that reads nothing (acknowledges
+  // nothing: a reader acknowledges what it read every capacity / 8 samples,
+  // 16 at most, and whenever it has read everything or waits). Past it, that
   // subscriber is reported once on core.errors() and no longer waited for
   // (it loses what is overwritten before it reads it, counted in its
   // lost()) until it has caught up.

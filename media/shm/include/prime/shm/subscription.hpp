@@ -103,8 +103,12 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     return take_views(max);
   }
 
-  // The newest sample: lets go of the one held first, so a collector costs
-  // one sample of the budget, and skips what is older.
+  // The newest sample, skipping what is older. At its budget the reader
+  // lets go of the one it keeps first, so a collector costs one sample of
+  // the budget; but not while a copy of it lives elsewhere (a chain still
+  // reading it): letting go would free nothing, and the newest could not
+  // be read. The one it keeps then stays, and the budget is reported as
+  // try_read() reports it.
   void read_latest(std::optional<Sample<View<T>>>& latest) override {
     auto& cursor = subscriber_->cursor();
     if (!cursor.ready()) {
@@ -112,7 +116,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       return;
     }
     cursor.skip_to_newest();
-    if (subscriber_->at_budget()) latest.reset();
+    if (subscriber_->at_budget() && latest && latest->value.only_view()) latest.reset();
     if (auto s = try_read()) latest = std::move(s);
   }
 

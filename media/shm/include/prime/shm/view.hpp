@@ -76,6 +76,9 @@ class View {
  private:
   template <Message>
   friend class SubscriptionReader;
+  // Whether no copy of this view lives: letting go of it lets go of its sample.
+  [[nodiscard]] bool only_view() const noexcept { return owner_ != nullptr && owner_->views_of(chunk_) == 1; }
+
   // A sample just taken by `owner`.
   View(detail::Subscriber* owner, const detail::Taken& taken)
       : owner_{owner}, chunk_{taken.chunk}, seq_{taken.seq}, info_{taken.info} {

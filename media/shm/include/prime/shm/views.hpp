@@ -19,9 +19,10 @@ class SubscriptionReader;
 // Samples read together in place (BatchReader::read): consecutive
 // sequences of one topic, kept from reuse until the batch is destroyed, and
 // then let go of all at once. On a `block` topic the cursor keeps them:
-// reading a batch writes nothing in shared memory, per sample or per batch
-// (a batch kept out for long is held instead, see detail/cursor.hpp). Its
-// samples count against the reader's max_held while it lives.
+// reading a batch writes nothing in shared memory per sample, two words
+// per batch (a batch kept out for long is held instead, see
+// detail/cursor.hpp). Its samples count against the reader's max_held
+// while it lives.
 //
 // Move-only; it may outlive its reader. Thread-safe to destroy on any
 // thread; one thread at a time reads it.

@@ -66,8 +66,9 @@ struct TakenBatch {
 // batch of views on a `block` topic needs none: the publisher overwrites no
 // sample a subscriber it waits for has not passed, and the cursor the
 // publisher sees stays at the first sample of the oldest such batch still
-// out. Taking one then writes nothing in shared memory, per sample or per
-// batch.
+// out. Taking one then writes nothing in shared memory per sample: per
+// batch, the end of the span it keeps (kept_end), and the cursor as the
+// reader acknowledges what it read (every ack_every_ samples).
 // - A subscriber joining, or waited for again after the publisher passed
 //   it over, is covered so from the head it sees after its cursor is
 //   stored (see Writer::slowest for why).

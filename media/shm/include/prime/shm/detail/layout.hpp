@@ -84,7 +84,9 @@ inline constexpr std::uint64_t kPublisherSleeper = 1;  // the space doorbell's o
 // A ring entry: which chunk carries which sequence, in one word, so that a
 // busy subscriber polls one cache line and learns both that its next sample
 // is out and where it is. The sequence is kept modulo 2^40 (compared with
-// wrap-around); the full one is in the chunk, which a subscriber checks.
+// wrap-around): a reader would take a later sample for its own only after
+// falling behind by a multiple of 2^40 samples (hours, at any rate a
+// machine reaches) to within a ring's length.
 struct RingEntry {
   static constexpr int kChunkBits = 24;
   static constexpr int kSeqBits = 40;
@@ -190,7 +192,7 @@ struct TopicHeader {
   std::atomic<std::uint64_t> full_fences_wanted{0};
   alignas(64) std::atomic<std::uint64_t> head{0};  // sequences published so far
   Doorbell data;   // rung when a sample is published; sleepers are subscriber slots' bits
-  Doorbell space;  // rung when the slowest subscriber reaches `space_wanted` (a `block` publisher waits)
+  Doorbell space;  // rung when a subscriber acknowledges `space_wanted` (a `block` publisher waits; it checks the slowest)
   alignas(64) std::atomic<std::uint64_t> space_wanted{~0ull};
   SubscriberSlot subscribers[kSlots];
 };

@@ -47,6 +47,10 @@ class Subscriber {
   // The first views of chunks just taken together: one read-modify-write
   // for them all.
   void hold_taken(std::span<const Taken> taken) noexcept { refs_.fetch_add(taken.size(), std::memory_order_acq_rel); }
+  // The views of `chunk` out now (copies of one view each count).
+  [[nodiscard]] std::uint32_t views_of(std::uint32_t chunk) const noexcept {
+    return views_[chunk].load(std::memory_order_acquire);
+  }
   // A copy of a view: the chunk is held already.
   void hold_again(std::uint32_t chunk) noexcept { views_[chunk].fetch_add(1, std::memory_order_relaxed); }
 

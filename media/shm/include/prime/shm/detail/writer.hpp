@@ -166,8 +166,8 @@ class Writer {
   // order, chunk i stamped stamp_of(i). Never waits. As publish() does, for
   // all at once: every size and stamp, then the ring entries one after
   // another (a subscriber polling the ring fetches its line once for several
-  // samples, not once for each), the head and one wake, then the chunks
-  // they pushed out.
+  // samples, not once for each), the head, the chunks they pushed out, and
+  // one wake.
   template <class StampOf>
   void publish_some(std::span<const std::uint32_t> chunks, std::size_t size, StampOf&& stamp_of) noexcept {
     const auto places = topic_->places();
