@@ -163,6 +163,22 @@ TEST_F(ShmTest, LatestKeepsItsValueWhileACopyOfItLivesAtTheBudget) {
   EXPECT_EQ(reader.lost(), 0u);
 }
 
+// A tool joins only a running system: a domain nobody is in is refused,
+// and the registry the attempt made is removed again.
+TEST_F(ShmTest, JoiningOnlyIfAliveRefusesADomainNobodyIsIn) {
+  const auto nobody = unique_domain("nobody");
+  try {
+    shm::Core tool{nobody, {.participant = "tool", .only_if_alive = true}};
+    ADD_FAILURE() << "joined a domain nobody is in";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.error().code, Errc::not_found);
+    EXPECT_NE(f.error().message.find("has no live participant"), std::string::npos) << f.error().message;
+  }
+  EXPECT_EQ(segments_of(nobody), 0) << "nothing left behind";
+  shm::Core tool{core.domain(), {.participant = "tool", .only_if_alive = true}};  // this test's core is alive
+  EXPECT_GE(tool.registry().participants.size(), 2u);
+}
+
 TEST_F(ShmTest, ALateJoinerGetsTheHistoryItAsksFor) {
   const shm::TopicQos qos{.capacity = 8};
   auto publisher = core.publisher<int>("map", qos);

@@ -198,6 +198,30 @@ TEST(PrimeTool, CleanRemovesAKilledDomainsSegmentsAndLeavesALiveOneAlone) {
   EXPECT_EQ(segments_of(live), 2) << "a live participant's segments are never touched";
 }
 
+// A domain whose processes were all killed keeps what they left for a look
+// (prime ls) until someone cleans it: a tool that reads or writes a topic
+// joins only a running system, so it never clears a dead one, as a program
+// of the system joining it does.
+TEST(PrimeTool, ToolsThatJoinADomainLeaveADeadOnesSegmentsAlone) {
+  const auto dead = unique_domain("tool-dead-look");
+  {
+    PeerProcess crashed{{"leave_segments", dead, "old"}};
+    ASSERT_TRUE(crashed.says("created"));
+    crashed.kill9();
+  }
+  ASSERT_EQ(segments_of(dead), 2);
+  for (const auto& args : std::vector<std::vector<std::string>>{{"echo", "old", "-n", "1"}, {"hz", "old", "-n", "1"}}) {
+    const auto run = prime(dead, args);
+    EXPECT_EQ(run.code, 3) << args[0] << ": " << run.out;
+    EXPECT_NE(run.out.find("has no live participant"), std::string::npos) << args[0] << ": " << run.out;
+    EXPECT_EQ(segments_of(dead), 2) << args[0] << " left the dead domain as it was";
+  }
+  const auto listed = prime(dead, {"ls"});
+  EXPECT_NE(listed.out.find("old"), std::string::npos) << "still there to look at:\n" << listed.out;
+  EXPECT_EQ(prime(dead, {"clean"}).code, 0);
+  EXPECT_EQ(segments_of(dead), 0);
+}
+
 // Compared with a twin topic no one observes, in batches taken in turn, so a
 // change in the machine's load meanwhile falls on both.
 TEST(PrimeTool, ObservingABlockTopicNeverSlowsItsPublisher) {

@@ -99,7 +99,7 @@ struct Watch {
   std::string schema;
 
   Watch(const Options& o, const std::string& command)
-      : core{check(o.domain), {.participant = "prime " + command}}, reader{core.observe(o.name)} {
+      : core{check(o.domain), {.participant = "prime " + command, .only_if_alive = true}}, reader{core.observe(o.name)} {
     for (const auto& t : core.registry().topics)
       if (t.name == o.name) schema = t.schema;
   }
@@ -376,7 +376,7 @@ int shm_pub(const Options& o) {
   const auto* t = find_topic(s, o.name);
   if (!t) throw Failure{{Errc::not_found, "no topic '" + o.name + "' in shm domain '" + o.domain + "' (its type comes from a publisher or subscriber)"}};
   const auto bytes = build(t->schema, t->qos.max_message_size, o.values);
-  shm::Core core{o.domain, {.participant = "prime pub"}};
+  shm::Core core{o.domain, {.participant = "prime pub", .only_if_alive = true}};
   auto publisher = core.raw_publisher(o.name);
   finish_on_ctrl_c();
   const auto period = o.rate > 0 ? std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1 / o.rate)) : Clock::duration::zero();
@@ -396,7 +396,7 @@ int shm_call(const Options& o) {
   const auto* v = find_service(s, o.name);
   if (!v) throw Failure{{Errc::not_found, "no service '" + o.name + "' in shm domain '" + o.domain + "'"}};
   const auto request = build(v->request_schema, v->qos.max_request_size, o.values);
-  shm::Core core{o.domain, {.participant = "prime call"}};
+  shm::Core core{o.domain, {.participant = "prime call", .only_if_alive = true}};
   auto service = core.raw_chain(o.name, {.timeout = std::chrono::milliseconds{static_cast<long>(o.timeout * 1000)}});
   std::vector<std::byte> reply;
   auto done = service.call_in_place(

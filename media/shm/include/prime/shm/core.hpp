@@ -112,7 +112,8 @@ class Core : public ErasedChainRuntime {
   explicit Core(std::string domain, DomainOptions options = {})
       : ErasedChainRuntime{"shm"},
         registry_{detail::Registry::join(domain, options.permissions,
-                                         options.participant.empty() ? program_name() : options.participant)} {
+                                         options.participant.empty() ? program_name() : options.participant,
+                                         options.only_if_alive)} {
     reclaim();
   }
   ~Core() { stop(); }

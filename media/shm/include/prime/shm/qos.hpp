@@ -109,6 +109,10 @@ struct DomainOptions {
   unsigned permissions = 0600;
   // How this participant is listed in the registry; empty: the program's name.
   std::string participant{};
+  // Join only a domain some live participant is in (Errc::not_found
+  // otherwise): for tools that look at or act on a running system, which
+  // must not clear what a dead one left, as joining a dead domain does.
+  bool only_if_alive = false;
 };
 
 }  // namespace prime::shm

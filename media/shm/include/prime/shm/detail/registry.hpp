@@ -72,12 +72,14 @@ struct RegistryLayout {
 class Registry : public std::enable_shared_from_this<Registry> {
  public:
   // Joins `domain` as `name`. When no participant of an earlier run is alive,
-  // that run's topics are removed first.
-  static std::shared_ptr<Registry> join(const std::string& domain, unsigned permissions, const std::string& name) {
+  // that run's topics are removed first; or, `only_if_alive` (a tool that
+  // works on a running system), nothing is touched and joining fails.
+  static std::shared_ptr<Registry> join(const std::string& domain, unsigned permissions, const std::string& name,
+                                        bool only_if_alive = false) {
     if (domain.empty()) throw Failure{{Errc::limit_exceeded, "shm: a domain needs a name"}};
     while (true) {
       auto registry = std::shared_ptr<Registry>{new Registry{domain, permissions}};
-      if (registry->enter(name)) return registry;
+      if (registry->enter(name, only_if_alive)) return registry;
     }
   }
   // The registry of `domain` seen from outside, joining nothing (no lease,
@@ -240,12 +242,21 @@ class Registry : public std::enable_shared_from_this<Registry> {
 
   // Takes a slot and its lease. False when the domain was removed meanwhile
   // (its last participant left): join again.
-  bool enter(const std::string& name) {
+  bool enter(const std::string& name, bool only_if_alive) {
     Locked lock{*this};
     auto& r = layout();
     if (r.magic.load() != kRegistryMagic) return false;
     const bool anyone_alive = std::any_of(std::begin(r.participants), std::end(r.participants),
                                           [this](const auto& p) { return alive(p.id.load()); });
+    if (!anyone_alive && only_if_alive) {
+      if (r.generation.load() == 0) {  // made by this join just now: nobody's, so it goes again
+        r.magic.store(0);
+        Segment::remove(segment_.name());
+      }
+      throw Failure{{Errc::not_found, "shm domain '" + domain_ +
+                                          "' has no live participant (every process in it has exited); what they "
+                                          "left stays as it is: 'prime ls' shows it, 'prime clean' removes it"}};
+    }
     if (!anyone_alive) {  // an earlier run died: start the domain afresh
       for (auto& e : r.endpoints) forget(e);
       for (auto& p : r.participants) p.id.store(0);
