@@ -455,6 +455,56 @@ TEST_F(ServiceTest, AFailureInsideALinkedCallReachesTheCaller) {
   EXPECT_EQ(linked(5), 6);
 }
 
+// A post down a linked route marks its cells of the later services as
+// posted (their workers free them); the calls that take those cells next
+// are calls like any other: answered, or told why they failed.
+TEST_F(ServiceTest, CallsAfterAPostDownALinkedRouteAreAnsweredOrToldWhy) {
+  std::atomic<int> posts_done{0};
+  core.serve("gate", [](const int& x) {
+    if (x < 0) throw std::invalid_argument{"negative"};
+    return x;
+  });
+  core.serve("count", [&](const int& x) {
+    if (x >= 1000) ++posts_done;
+    return x + 1;
+  });
+  auto linked = core.chain<int, int>("gate") | core.chain<int, int>("count");
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(linked.post(1000 + i));  // every cell of this client, as calls_per_client is 4
+  ASSERT_TRUE(MappedTopic::within(10s, [&] { return posts_done == 4; }));
+  // A post's cells are free once its worker is done: a call before then is
+  // refused as one too many in flight, and sent again.
+  auto call = [&](int x) {
+    while (true) {
+      auto out = linked.call(x);
+      if (out || out.error().message.find("calls_per_client") == std::string::npos) return out;
+    }
+  };
+  for (int i = 0; i < 8; ++i) {
+    auto failed = call(-1);
+    ASSERT_FALSE(failed);
+    EXPECT_EQ(failed.error().code, Errc::block_failed) << i << ": " << failed.error().describe();
+    auto answered = call(i);
+    ASSERT_TRUE(answered) << i << ": " << answered.error().describe();
+    EXPECT_EQ(*answered, i + 1);
+  }
+}
+
+// A server takes a service, then sets its limits: a caller that binds in
+// between finds no timeout set yet, and waits the default, not nothing.
+TEST_F(ServiceTest, ACallToAServiceWhoseLimitsAreNotSetYetWaitsTheDefault) {
+  core.serve("busy", [](const int& x) {
+    const auto until = Clock::now() + 5ms;  // a block that takes a while (work, not a wait for anything)
+    while (Clock::now() < until) {
+    }
+    return x + 1;
+  });
+  MappedService{core.domain(), "busy"}.header().timeout_ns.store(0);
+  auto busy = core.chain<int, int>("busy");
+  auto answered = busy.call(1);
+  ASSERT_TRUE(answered) << answered.error().describe();
+  EXPECT_EQ(*answered, 2);
+}
+
 TEST_F(ServiceTest, ManyThreadsOnOneHandleEachGetTheirOwnAnswer) {
   core.serve("echo", [](const std::uint64_t& x) { return x * 3; }, {.workers = 2, .calls_per_client = 8});
   auto echo = core.chain<std::uint64_t, std::uint64_t>("echo");

@@ -197,7 +197,7 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
     Held& operator[](std::size_t i) { return at[i]; }
   } held;
   auto release_all = [&] {
-    for (auto& h : held) h.service->release(h.cell);
+    for (auto& h : held) h.service->release(h.cell, h.ticket);
   };
   const auto now = Clock::now();
   for (const auto& binding : route) {
@@ -215,10 +215,13 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
     held.back().ticket = Status::ticket(held.back().service->cell(*cell).status.load());
   }
 
-  // The call's deadline: the client's timeout, or the longest its services allow.
+  // The call's deadline: the client's timeout, or the longest its services
+  // allow (a server sets its limits just after it takes the service: one
+  // found with none yet allows the default).
   auto timeout = std::chrono::nanoseconds{route.front()->qos().timeout};
   if (timeout == std::chrono::nanoseconds::zero())
     for (auto& h : held) timeout = std::max(timeout, std::chrono::nanoseconds{h.service->header().timeout_ns.load()});
+  if (timeout == std::chrono::nanoseconds::zero()) timeout = ServiceQos{}.timeout;
   const auto deadline = now + timeout;
 
   auto& first = held.front();
@@ -234,8 +237,10 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   c.next_hops = static_cast<std::uint32_t>(held.size() - 1);
   for (std::size_t k = 1; k < held.size(); ++k)
     first.service->tail(first.cell).next[k - 1] = {held[k].service->index(), static_cast<std::uint32_t>(held[k].cell), held[k].ticket};
-  if (posted)  // the workers free what a post leaves; the caller lets go of the rest now
-    for (std::size_t k = 1; k < held.size(); ++k) held[k].service->cell(held[k].cell).posted = 1;
+  // Every cell of the route says whether it is posted (its worker then
+  // frees it), as the first does: a cell a post left marked, taken by a
+  // call, would be freed unanswered where the call fails before reaching it.
+  for (std::size_t k = 1; k < held.size(); ++k) held[k].service->cell(held[k].cell).posted = posted ? 1 : 0;
   c.status.store(Status::pack(first.ticket, CellState::queued), std::memory_order_release);
   first.service->header().requests_in.fetch_add(1, std::memory_order_relaxed);
   first.service->enqueue(first.cell);

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <memory>
 #include <new>
+#include <optional>
 #include <string>
 
 #include "prime/common/fingerprint.hpp"
@@ -156,14 +157,16 @@ class Service {
   }
 
   // Lets go of cell `i` for whoever holds it: frees it, or, while a worker
-  // holds it, marks it abandoned for that worker to free.
-  void release(std::size_t i) const {
+  // holds it, marks it abandoned for that worker to free. With `only`, only
+  // while it still carries that ticket (the call it was claimed for): once
+  // freed, it may carry another call of the same client.
+  void release(std::size_t i, std::optional<std::uint64_t> only = std::nullopt) const {
     auto& status = cell(i).status;
     auto s = status.load();
     while (true) {
       const auto state = Status::state(s);
       const auto ticket = Status::ticket(s);
-      if (state == CellState::free || state == CellState::abandoned) return;
+      if (state == CellState::free || state == CellState::abandoned || (only && ticket != *only)) return;
       const auto next = state == CellState::running || state == CellState::forwarding
                             ? Status::pack(ticket, CellState::abandoned)
                             : Status::pack(ticket + 1, CellState::free);
