@@ -5,8 +5,10 @@
 #include <array>
 
 #include <chrono>
+#include <cstdint>
 #include <tuple>
 
+#include "prime/topology/interpolate.hpp"
 #include "prime/topology/sync.hpp"
 
 namespace prime::test {
@@ -155,6 +157,15 @@ TEST_F(SyncRules, WaitingValuesAreBoundedByTheDepth) {
   offer<1>(*s, 0, 0ms);  // long gone: only the last 4 were kept
   offer<1>(*s, 99, 99ms);
   EXPECT_EQ(matches(), (std::vector<Pair>{{99, 99}}));
+}
+
+// An unsigned value that goes down (an encoder counting back) is
+// interpolated as it goes, not around the type's range.
+TEST(Interpolation, AnUnsignedValueGoingDownIsInterpolatedWithoutWrappingAround) {
+  EXPECT_EQ(detail::interpolated<unsigned>(10u, 4u, 0.5), 7u);
+  EXPECT_EQ(detail::interpolated<std::uint64_t>(1000, 0, 0.25), 750u);
+  EXPECT_EQ(detail::interpolated<int>(-10, 10, 0.75), 5);
+  EXPECT_DOUBLE_EQ(detail::interpolated<double>(1.0, 0.0, 0.25), 0.75);
 }
 
 }  // namespace

@@ -320,6 +320,20 @@ TYPED_TEST(SourceTest, SyncApproximateTimeMakesTheBestSetsWhateverTheWorkersOrde
   this->play(approximate_time(), kApproximateTimeScenario);
 }
 
+TYPED_TEST(SourceTest, ASyncThatWouldKeepNoValueIsRefusedByName) {
+  auto lidar = this->template feed<int>("lidar");
+  auto odom = this->template feed<int>("odom");
+  auto none = approximate_time({});
+  none.depth = 0;
+  try {
+    (void)sync(none, lidar.source, odom.source);
+    ADD_FAILURE() << "a depth of 0 was taken";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.error().code, Errc::limit_exceeded);
+    EXPECT_NE(f.error().message.find("a depth of 0"), std::string::npos) << f.error().message;
+  }
+}
+
 TYPED_TEST(SourceTest, SyncLatestOfEachCanBeMadeByAnyInput) {
   auto lidar = this->template feed<int>("lidar");
   auto odom = this->template feed<int>("odom");

@@ -965,6 +965,9 @@ TEST_F(ShmTest, ASyncOfTopicsHoldsNoMoreThanTheirMaxHeld) {
   EXPECT_TRUE(fails_with([&] { (void)sync(exact_time, core.subscribe<int>("sync/lidar", {}, qos),
                                           core.subscribe<int>("thin", {}, {.max_held = 2})); },
                          Errc::limit_exceeded, "source 'thin' lets a reader hold 2 values (max_held); a sync needs at least 4"));
+  EXPECT_TRUE(fails_with([&] { (void)sync(exact_time, core.subscribe<int>("sync/lidar", {}, qos),
+                                          core.subscribe<int>("thinnest", {}, {.max_held = 1})); },
+                         Errc::limit_exceeded, "source 'thinnest' lets a reader hold 1 values (max_held); a sync needs at least 4"));
 }
 
 TEST_F(ShmTest, TheRegistryListsParticipantsAndTopicsWithPidsAndQos) {

@@ -45,12 +45,19 @@ const auto& plain(const V& v) {
 template <class V>
 using plain_t = std::remove_cvref_t<decltype(plain(std::declval<const V&>()))>;
 
-// `before` + (`after` − `before`) × `fraction`: numbers as they are, other
+// `before` + (`after` − `before`) × `fraction`: numbers as they are (in
+// double, so an unsigned value that goes down does not wrap around), other
 // types by an `interpolate(before, after, fraction)` found next to them.
 template <class T>
 T interpolated(const T& before, const T& after, double fraction) {
-  if constexpr (std::is_arithmetic_v<T>) return static_cast<T>(before + (after - before) * fraction);
-  else return interpolate(before, after, fraction);
+  if constexpr (std::is_floating_point_v<T>) {
+    return static_cast<T>(before + (after - before) * fraction);
+  } else if constexpr (std::is_arithmetic_v<T>) {
+    const auto from = static_cast<double>(before);
+    return static_cast<T>(from + (static_cast<double>(after) - from) * fraction);
+  } else {
+    return interpolate(before, after, fraction);
+  }
 }
 
 template <class A, class V>

@@ -258,7 +258,7 @@ struct SyncBudget {
     SyncBudget b{0, 0};
     for (const auto held : max_held)
       if (held != 0) b.smallest = b.smallest == 0 ? held : std::min(b.smallest, held);
-    if (b.smallest != 0) b.queued_sets = std::max<std::size_t>(1, (b.smallest - 2) / 4);
+    if (b.smallest != 0) b.queued_sets = std::max<std::size_t>(1, b.smallest > 2 ? (b.smallest - 2) / 4 : 0);
     return b;
   }
 
@@ -292,6 +292,8 @@ auto start_sync(SyncPolicy policy, std::index_sequence<I...>, const S&... source
   std::string name = "sync(";
   ((name += (I == 0 ? "" : ", ") + sources.name()), ...);
   name += ")";
+  if (policy.depth == 0 && policy.kind != SyncPolicy::Kind::latest_of_each)
+    throw Failure{{Errc::limit_exceeded, name + ": a depth of 0 keeps no value to match (at least 1)"}};
   const auto budget = SyncBudget::of({sources.qos().max_held...});
   const std::array<std::size_t, sizeof...(S)> depths{budget.depth(policy.depth, sources.qos(), name, sources.name())...};
   Graph graph = Graph::sequence(Graph::parallel({&sources.graph()...}), Graph::node(name, "sync", runtime->medium()));
