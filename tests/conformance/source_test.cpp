@@ -232,6 +232,32 @@ TYPED_TEST(SourceTest, AWorkerReportsABlocksExceptionAndKeepsRunning) {
   EXPECT_NE(report->value.message.find("lidar | check"), std::string::npos) << report->value.message;
 }
 
+// An error source of the block policy whose reader never reads: each error
+// waits for room, and the one that says an error found none goes to stderr,
+// not into the same full source again (and again, without end). The worker
+// goes on.
+TYPED_TEST(SourceTest, AnErrorSourceThatNeverMakesRoomHoldsNoWorkerForever) {
+  auto& core = *this->core;
+  auto stalled = core.errors({.capacity = 1, .overflow = Overflow::block, .block_timeout = 20ms}).subscribe();
+  auto lidar = this->template feed<int>("lidar");
+  auto checked = lidar.source | core.chain(
+                                    [](int x) {
+                                      if (x < 0) throw std::invalid_argument{"negative range"};
+                                      return x;
+                                    },
+                                    "check");
+  auto reader = checked.subscribe();
+  lidar.emit(-1);  // fills the error source
+  lidar.emit(-2);  // finds no room
+  lidar.emit(7);
+  auto value = reader.read_for(kPatience);
+  ASSERT_TRUE(value) << value.error().describe();
+  EXPECT_EQ(value->value, 7) << "the worker went on";
+  auto first = stalled.try_read();
+  ASSERT_TRUE(first);
+  EXPECT_NE(first->value.message.find("negative range"), std::string::npos) << first->value.message;
+}
+
 TYPED_TEST(SourceTest, CollectorGivesTheLatestValueOnAToken) {
   auto& core = *this->core;
   auto odom = this->template feed<int>("odom");

@@ -35,12 +35,20 @@ class RuntimeState {
   }
 
   // Goes to every subscriber of the core's error source; with none, to stderr,
-  // so an error is never lost in silence.
+  // so an error is never lost in silence. An error about handing an error on
+  // (an error source of the block policy whose reader made no room) goes to
+  // stderr too: handed on, it would wait for that same reader again, and
+  // report again, without end.
   void report(Error error) {
-    if (errors_.listener_count() == 0) {
+    thread_local bool reporting = false;
+    if (reporting || errors_.listener_count() == 0) {
       std::cerr << "prime [" << medium_ << "] " << error.describe() << '\n';
       return;
     }
+    reporting = true;
+    struct Done {
+      ~Done() { reporting = false; }
+    } const done;
     errors_.emit(std::move(error));
   }
 
