@@ -210,6 +210,25 @@ TEST_F(OptimusChain, GarbageInARequestKeyIsReportedAndTheServiceKeepsServing) {
   EXPECT_EQ(echo(9), 9);
 }
 
+// A server that refuses a worker's wait (here its request key holds another
+// type) is told by its own error, not as a lost server, and asked again
+// after a backoff; once the key is sound the service serves again.
+TEST_F(OptimusChain, AWorkerWhoseWaitTheServerRefusesSaysWhyAndServesOnceItMay) {
+  optimus::Core core{options()};
+  auto errors = core.errors().subscribe();
+  auto echo = core.serve("echo", [](int x) { return x; }, {.workers = 1});
+  RawRedis raw{shared_redis().url()};
+  raw.command({"SET", domain + ":svc:echo", "a string, not a list"});
+  for (int i = 0; i < 3; ++i) {
+    auto report = errors.read_for(5s);
+    ASSERT_TRUE(report) << i;
+    EXPECT_NE(report->value.message.find("WRONGTYPE"), std::string::npos) << report->value.describe();
+    EXPECT_EQ(report->value.message.find("lost"), std::string::npos) << "not a lost server: " << report->value.describe();
+  }
+  raw.command({"DEL", domain + ":svc:echo"});
+  EXPECT_EQ(echo(9), 9);
+}
+
 TEST_F(OptimusChain, AMessageOfTheWrongTypeIsATypeMismatchFromTheService) {
   optimus::Core core{options()};
   (void)core.serve("ints", [](int x) { return x; });

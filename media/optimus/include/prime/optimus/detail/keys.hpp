@@ -28,6 +28,10 @@ inline constexpr std::chrono::milliseconds kAliveRefresh{1000};
 // How long one blocking wait of a worker lasts before it looks around (a
 // refresh, a reconnect); a stop request ends it at once.
 inline constexpr std::chrono::milliseconds kWaitSlice{1000};
+// How long a worker whose wait the server refused waits before it asks
+// again: doubling from the first to the most.
+inline constexpr std::chrono::milliseconds kFirstRefusedBackoff{50};
+inline constexpr std::chrono::milliseconds kMaxRefusedBackoff{1000};
 // Extra time a socket read is allowed beyond the server-side block.
 inline constexpr std::chrono::milliseconds kSocketMargin{1000};
 

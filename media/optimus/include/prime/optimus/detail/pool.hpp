@@ -24,6 +24,15 @@
 
 namespace prime::optimus::detail {
 
+// Sleeps until `until`; false when a stop request ended it.
+inline bool pause(Clock::time_point until, const std::stop_token& stop) {
+  std::mutex m;
+  std::condition_variable_any cv;
+  std::unique_lock lock{m};
+  cv.wait_until(lock, stop, until, [] { return false; });
+  return !stop.stop_requested();
+}
+
 // Connections to one server, shared by every thread of a process that talks
 // to it: a thread leases one for what it does and gives it back. A connection
 // that broke is dropped, and so is every idle one opened before the break (the

@@ -42,8 +42,11 @@ std::expected<std::string, Error> run_block(const F& block, std::string_view pay
 // One worker of a service: waits on the request key, runs the block, and
 // sends the result on (the next service of the request's route) or back (the
 // caller's reply key). Runs until `stop`; rides out a lost server by
-// reconnecting with backoff. What it sends is pipelined with its next wait,
-// so a busy worker makes one round trip per request.
+// reconnecting with backoff, and a server that refuses its wait (a key of
+// another type, a server still loading, an ACL) by asking again after a
+// backoff of its own, reporting the server's error each time. What it sends
+// is pipelined with its next wait, so a busy worker makes one round trip per
+// request.
 template <class In, class F>
 void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, const std::string& key,
                     const F& block, const std::weak_ptr<prime::detail::RuntimeState>& runtime, std::stop_token stop) {
@@ -55,8 +58,10 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
     if (auto r = runtime.lock()) r->report(std::move(error));
   };
   std::vector<std::vector<std::string>> outbox;  // commands to send with the next wait
+  auto refused_backoff = kFirstRefusedBackoff;
 
   while (!stop.stop_requested()) {
+    bool refused = false;
     auto lease = pool->acquire_until(Clock::time_point::max(), stop);
     if (!lease) return;  // stopped
     auto& connection = **lease;
@@ -104,8 +109,10 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
       if (!got) break;
       if (is_error(**got)) {
         report(server_error(**got, where + ": waiting for requests"));
+        refused = true;
         break;
       }
+      refused_backoff = kFirstRefusedBackoff;
       if (is_nil(**got) || (**got).type != REDIS_REPLY_ARRAY || (**got).elements != 2) continue;
 
       auto request = decode_request(text(*(**got).element[1]));
@@ -139,6 +146,11 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
     if (stop.stop_requested()) {
       lease->discard();
       return;
+    }
+    if (refused) {  // the connection is sound (it goes back after): the worker waits before asking again
+      if (!pause(Clock::now() + refused_backoff, stop)) return;
+      refused_backoff = std::min(refused_backoff * 2, kMaxRefusedBackoff);
+      continue;
     }
     report({Errc::unreachable, where + ": lost " + pool->url() + "; reconnecting"});
   }

@@ -2,13 +2,11 @@
 
 #include <algorithm>
 #include <chrono>
-#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
 #include <expected>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <stop_token>
 #include <string>
@@ -220,15 +218,6 @@ class StreamReader final : public Reader<T>::Impl {
       }
       cache_.push_back(Sample<T>{std::move(*value), Clock::time_point{std::chrono::nanoseconds{fields->stamp_ns}}});
     }
-  }
-
-  // Sleeps until `until`; false when a stop request ended it.
-  bool pause(Clock::time_point until, std::stop_token stop) {
-    std::mutex m;
-    std::condition_variable_any cv;
-    std::unique_lock lock{m};
-    cv.wait_until(lock, stop, until, [] { return false; });
-    return !stop.stop_requested();
   }
 
   std::shared_ptr<StreamState> state_;  // a reader keeps its source (and what feeds it) alive
