@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "optimus/support/child_process.hpp"
@@ -50,6 +51,31 @@ TEST_F(OptimusProcess, ABlockThatThrowsInAnotherProcessIsAnErrorHere) {
   auto failing = core.service<int, int>("fail");
   EXPECT_TRUE(fails_with([&] { (void)failing(3); }, Errc::block_failed, "failing on 3"));
   EXPECT_EQ((core.service<int, int>("double")(2)), 4) << "the process keeps serving";
+}
+
+// A block reader's process killed with its room full: writers wait for it
+// (block_timeout, then the value is dropped for it and reported) only until
+// its lease runs out, not on every publish for as long as the source lives.
+TEST_F(OptimusProcess, AKilledBlockReaderIsWaitedForOnlyUntilItsLeaseRunsOut) {
+  optimus::Core core{options()};
+  auto errors = core.errors().subscribe();
+  auto publisher = core.publisher<int>("held", {.capacity = 8, .overflow = Overflow::block, .block_timeout = 50ms});
+  auto reader = helper({"block_reader", "held"});
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(publisher.publish(i));  // room for 2
+  auto full = errors.read_for(5s);
+  ASSERT_TRUE(full) << "the third was dropped for the reader that made no room";
+  EXPECT_EQ(full->value.code, Errc::overflow) << full->value.describe();
+  reader.kill();  // kill -9: no goodbye
+  RawRedis raw{shared_redis().url()};
+  const auto leases = domain + ":readers:held:lease:*";
+  const auto give_up = Clock::now() + 10s;
+  while (raw.command({"KEYS", leases})->elements != 0) {  // the server's clock runs the lease out
+    ASSERT_LT(Clock::now(), give_up) << "the dead reader's lease never ran out";
+    std::this_thread::sleep_for(50ms);  // a poll of the server, not a wait for anything of ours
+  }
+  for (int i = 3; i < 10; ++i) ASSERT_TRUE(publisher.publish(i));
+  auto more = errors.try_read();
+  EXPECT_FALSE(more) << "no longer waited for: " << more->value.describe();
 }
 
 TEST_F(OptimusProcess, AServiceProcessKilledAndRestartedIsFoundAgain) {

@@ -4,6 +4,7 @@
 //
 //   optimus_service_helper <url> <domain> serve          double, add_one, times_ten, whoami, fail
 //   optimus_service_helper <url> <domain> publish <name> waits for "go <n>" lines, publishes n ints each
+//   optimus_service_helper <url> <domain> block_reader <name> a block reader of 2 ints' room that reads nothing
 #include <unistd.h>
 
 #include <iostream>
@@ -26,6 +27,14 @@ int main(int argc, char** argv) {
       (void)core.serve("times_ten", [](int x) { return x * 10; });
       (void)core.serve("whoami", [](int) { return static_cast<int>(::getpid()); });
       (void)core.serve("fail", [](int x) -> int { throw std::runtime_error{"failing on " + std::to_string(x)}; });
+      std::cout << "ready" << std::endl;
+      std::string line;
+      while (std::getline(std::cin, line)) {
+      }
+      return 0;
+    }
+    if (role == "block_reader" && argc >= 5) {
+      auto reader = core.subscribe<int>(argv[4], {.capacity = 2, .overflow = prime::Overflow::block}).subscribe();
       std::cout << "ready" << std::endl;
       std::string line;
       while (std::getline(std::cin, line)) {

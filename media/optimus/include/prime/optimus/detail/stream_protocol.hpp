@@ -37,7 +37,10 @@ namespace prime::optimus::detail {
 // The stream is trimmed to exactly ARGV[1] entries. Mode ARGV[4]: "drop"
 // appends; "wait" appends only if every registered reader has room and
 // otherwise returns {0, full}; "force" appends and marks the full readers.
-//   KEYS: stream, readers hash.  ARGV: maxlen, stamp, message, mode.
+// A full reader whose lease (the key ARGV[5] .. id) has run out is gone: a
+// process that died, or one that has not read for kReaderLease. It is
+// struck from the readers, not waited for, until it reads again.
+//   KEYS: stream, readers hash.  ARGV: maxlen, stamp, message, mode, lease prefix.
 // The readers hash holds, per reader id, "r<id>" = reader_progress() and
 // "l<id>" = how many values were dropped for it.
 inline constexpr std::string_view kPublishScript = R"lua(
@@ -56,7 +59,14 @@ if ARGV[4] ~= 'drop' then
   for i = 1, #readers, 2 do
     if string.sub(readers[i], 1, 1) == 'r' then
       local cursor, capacity = string.match(readers[i + 1], '^(%d+) (%d+)$')
-      if cursor and n - tonumber(cursor) > tonumber(capacity) then full[#full + 1] = string.sub(readers[i], 2) end
+      local id = string.sub(readers[i], 2)
+      if cursor and n - tonumber(cursor) > tonumber(capacity) then
+        if redis.call('EXISTS', ARGV[5] .. id) == 1 then
+          full[#full + 1] = id
+        else
+          redis.call('HDEL', KEYS[2], readers[i])
+        end
+      end
     end
   end
   if #full > 0 and ARGV[4] == 'wait' then return {0, #full} end
@@ -115,6 +125,14 @@ inline std::optional<std::uint64_t> epoch_from_time(const redisReply& time) {
 
 // A reader's fields in the readers hash.
 inline std::string reader_field(std::string_view reader_id) { return "r" + std::string{reader_id}; }
+// A `block` reader's lease: a key that lives kReaderLease after the reader
+// last read or waited (each refreshes it). Writers stop waiting for a
+// reader whose lease ran out; the reader's next read registers it again.
+inline constexpr std::chrono::milliseconds kReaderLease{3000};
+inline std::string lease_prefix(std::string_view readers_key) { return std::string{readers_key} + ":lease:"; }
+inline std::string lease_key(std::string_view readers_key, std::string_view reader_id) {
+  return lease_prefix(readers_key) + std::string{reader_id};
+}
 inline std::string lost_field(std::string_view reader_id) { return "l" + std::string{reader_id}; }
 // What a `block` reader registers: the sequence number it has read up to and
 // how many more it has room for.

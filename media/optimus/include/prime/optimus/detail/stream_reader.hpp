@@ -44,6 +44,7 @@ class StreamReader final : public Reader<T>::Impl {
     reader_id_ = state_->pool().process_id() + "." + std::to_string(state_->pool().next_id());
     reader_field_ = reader_field(reader_id_);
     lost_field_ = lost_field(reader_id_);
+    lease_key_ = lease_key(state_->readers_key(), reader_id_);
     capacity_ = std::to_string(std::min(qos_.capacity, state_->qos().capacity));
     auto lease = state_->pool().acquire();
     if (!lease) throw Failure{state_->named(lease.error())};
@@ -59,8 +60,13 @@ class StreamReader final : public Reader<T>::Impl {
       }
     }
     if (block_) {
-      auto registered = c.command({"HSET", state_->readers_key(), reader_field_, progress()});
-      if (!registered) throw Failure{state_->named(registered.error())};
+      register_progress(c);
+      for (int i = 0; i < 2; ++i) {
+        auto registered = c.reply();
+        if (!registered) throw Failure{state_->named(registered.error())};
+        if (is_error(**registered))
+          throw Failure{server_error(**registered, "source '" + state_->name() + "': registering a block reader")};
+      }
     }
   }
   StreamReader(const StreamReader&) = delete;
@@ -71,6 +77,7 @@ class StreamReader final : public Reader<T>::Impl {
     if (auto lease = state_->pool().acquire()) {
       (*lease)->set_timeout(state_->command_timeout());
       (void)(*lease)->command({"HDEL", state_->readers_key(), reader_field_, lost_field_});
+      (void)(*lease)->command({"DEL", lease_key_});
     }
   }
 
@@ -124,6 +131,25 @@ class StreamReader final : public Reader<T>::Impl {
   }
 
   std::string progress() const { return reader_progress(last_.seq, capacity_); }
+
+  // A `block` reader's registration, sent before each read or wait: how far
+  // it has read, and its lease renewed (writers stop waiting for a reader
+  // whose lease ran out: it died, or stopped reading).
+  void register_progress(Connection& c) const {
+    static const std::string lease_ms = std::to_string(kReaderLease.count());
+    c.append({"HSET", state_->readers_key(), reader_field_, progress()});
+    c.append({"SET", lease_key_, "1", "PX", lease_ms});
+  }
+  // Their two replies; an error names the source.
+  std::expected<void, Error> registration_replies(Connection& c) const {
+    for (int i = 0; i < 2; ++i) {
+      auto registered = c.reply();
+      if (!registered) return std::unexpected(state_->named(registered.error()));
+      if (is_error(**registered))
+        return std::unexpected(server_error(**registered, "source '" + state_->name() + "': registering a block reader"));
+    }
+    return {};
+  }
   Error stopped() const { return {Errc::stopped, "source '" + state_->name() + "': the reader was stopped"}; }
   Error timed_out() const { return {Errc::timeout, "source '" + state_->name() + "': no value before the deadline"}; }
 
@@ -136,15 +162,13 @@ class StreamReader final : public Reader<T>::Impl {
     c.set_timeout(state_->command_timeout());
     const std::string after = cursor_ == "0-0" ? std::string{"-"} : "(" + cursor_;
     if (block_) {
-      c.append({"HSET", state_->readers_key(), reader_field_, progress()});
+      register_progress(c);
       c.append({"XRANGE", state_->key(), after, "+", "COUNT", capacity_});
     } else {
       c.append({"XREVRANGE", state_->key(), "+", after, "COUNT", capacity_});
     }
-    if (block_) {
-      auto registered = c.reply();
-      if (!registered) return std::unexpected(state_->named(registered.error()));
-    }
+    if (block_)
+      if (auto registered = registration_replies(c); !registered) return registered;
     auto entries = c.reply();
     if (!entries) return std::unexpected(state_->named(entries.error()));
     if (is_error(**entries)) return std::unexpected(server_error(**entries, "source '" + state_->name() + "': reading"));
@@ -161,13 +185,11 @@ class StreamReader final : public Reader<T>::Impl {
     const auto ms = std::to_string(std::max<std::int64_t>(block_for.count(), 1));
     c.set_timeout(std::chrono::duration_cast<std::chrono::microseconds>(block_for) + kSocketMargin);
     StopGuard guard{c, stop};
-    if (block_) c.append({"HSET", state_->readers_key(), reader_field_, progress()});
+    if (block_) register_progress(c);
     c.append({"XREAD", "COUNT", capacity_, "BLOCK", ms, "STREAMS", state_->key(), cursor_});
     if (!c.flush()) return std::unexpected(state_->named(Error{Errc::unreachable, "redis at " + c.url() + ": connection lost"}));
-    if (block_) {
-      auto registered = c.reply();
-      if (!registered) return std::unexpected(state_->named(registered.error()));
-    }
+    if (block_)
+      if (auto registered = registration_replies(c); !registered) return registered;
     if (!guard.begin_blocking()) {
       lease->discard();
       return {};
@@ -226,6 +248,7 @@ class StreamReader final : public Reader<T>::Impl {
   std::string reader_id_;
   std::string reader_field_;
   std::string lost_field_;
+  std::string lease_key_;
   std::string capacity_;
   std::string cursor_ = "0-0";
   EntryId last_;  // of the last entry read (or the newest when subscribing)

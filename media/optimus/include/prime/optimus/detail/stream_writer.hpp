@@ -381,6 +381,7 @@ class StreamState {
       if (!sha) return std::unexpected(std::move(sha.error()));
       std::vector<std::string_view> args{"EVALSHA", *sha, "2", key_, readers_key_};
       args.insert(args.end(), argv.begin(), argv.end());
+      args.push_back(lease_prefix_);
       auto r = c.command(args);
       if (!r) return std::unexpected(named(r.error()));
       if (is_error(**r)) {
@@ -402,6 +403,7 @@ class StreamState {
   const std::string name_;
   const std::string key_;
   const std::string readers_key_;
+  const std::string lease_prefix_{lease_prefix(readers_key_)};
   const Qos qos_;
   const std::weak_ptr<prime::detail::RuntimeState> runtime_;
   const std::string maxlen_;
