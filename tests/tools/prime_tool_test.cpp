@@ -174,6 +174,8 @@ TEST(PrimeTool, GraphNamesEveryEdgeOfAThreeProcessSystem) {
                            p(::getpid()) + " -> \"service:tool/echo\" [label=\"calls\"]"})
     EXPECT_NE(graph.out.find(edge), std::string::npos) << edge << " missing from\n" << graph.out;
   EXPECT_EQ(graph.out.rfind("digraph prime {", 0), 0u);
+  EXPECT_NE(graph.out.find("label=\"tool/echo\\nprime::test::Ask -> prime::test::Answer\""), std::string::npos)
+      << "a line break in DOT, not the text \\n:\n" << graph.out;
 }
 
 TEST(PrimeTool, CleanRemovesAKilledDomainsSegmentsAndLeavesALiveOneAlone) {

@@ -28,6 +28,25 @@ struct Json {
   [[nodiscard]] const Array& array() const { return *std::get<std::shared_ptr<Array>>(value); }
 };
 
+// Code point `code` as UTF-8.
+inline void append_utf8(std::string& out, unsigned code) {
+  if (code < 0x80) {
+    out.push_back(static_cast<char>(code));
+  } else if (code < 0x800) {
+    out.push_back(static_cast<char>(0xc0 | (code >> 6)));
+    out.push_back(static_cast<char>(0x80 | (code & 0x3f)));
+  } else if (code < 0x10000) {
+    out.push_back(static_cast<char>(0xe0 | (code >> 12)));
+    out.push_back(static_cast<char>(0x80 | ((code >> 6) & 0x3f)));
+    out.push_back(static_cast<char>(0x80 | (code & 0x3f)));
+  } else {
+    out.push_back(static_cast<char>(0xf0 | (code >> 18)));
+    out.push_back(static_cast<char>(0x80 | ((code >> 12) & 0x3f)));
+    out.push_back(static_cast<char>(0x80 | ((code >> 6) & 0x3f)));
+    out.push_back(static_cast<char>(0x80 | (code & 0x3f)));
+  }
+}
+
 // Parses `text`; throws std::invalid_argument saying where it went wrong.
 inline Json parse_json(std::string_view text) {
   std::size_t at = 0;
@@ -85,8 +104,33 @@ inline Json parse_json(std::string_view text) {
     if (c == '"') {
       std::string s;
       for (++at; at < text.size() && text[at] != '"'; ++at) {
-        if (text[at] == '\\' && at + 1 < text.size()) ++at;
-        s.push_back(text[at]);
+        if (text[at] != '\\') {
+          s.push_back(text[at]);
+          continue;
+        }
+        if (++at >= text.size()) break;
+        switch (text[at]) {
+          case 'n': s.push_back('\n'); break;
+          case 't': s.push_back('\t'); break;
+          case 'r': s.push_back('\r'); break;
+          case 'b': s.push_back('\b'); break;
+          case 'f': s.push_back('\f'); break;
+          case 'u': {
+            unsigned code = 0;
+            if (at + 4 >= text.size() || std::sscanf(std::string{text.substr(at + 1, 4)}.c_str(), "%4x", &code) != 1)
+              return fail("a \\u escape without four hex digits");
+            at += 4;
+            unsigned low = 0;  // a pair of surrogates is one code point
+            if (code >= 0xd800 && code < 0xdc00 && text.substr(at + 1, 2) == "\\u" && at + 6 < text.size() &&
+                std::sscanf(std::string{text.substr(at + 3, 4)}.c_str(), "%4x", &low) == 1 && low >= 0xdc00 && low < 0xe000) {
+              code = 0x10000 + ((code - 0xd800) << 10) + (low - 0xdc00);
+              at += 6;
+            }
+            append_utf8(s, code);
+            break;
+          }
+          default: s.push_back(text[at]);  // \" \\ \/
+        }
       }
       if (at >= text.size()) return fail("unterminated string");
       ++at;

@@ -10,6 +10,7 @@
 #include <string_view>
 #include <vector>
 
+#include "dot.hpp"
 #include "json.hpp"
 #include "message_text.hpp"
 #include "prime/logic/error.hpp"
@@ -216,9 +217,9 @@ int optimus_graph(const Options& o) {
   const auto e = endpoints(r, o);
   std::cout << "digraph prime {\n  rankdir=LR;\n  label=" << quote("optimus domain " + o.domain) << ";\n";
   for (const auto& [name, record] : e.sources)
-    std::cout << "  " << quote("source:" + name) << " [shape=ellipse, label=" << quote(name + "\\n" + described(record)) << "];\n";
+    std::cout << "  " << quote("source:" + name) << " [shape=ellipse, label=" << dot_label({name, described(record)}) << "];\n";
   for (const auto& [name, record] : e.services)
-    std::cout << "  " << quote("service:" + name) << " [shape=hexagon, label=" << quote(name + "\\n" + described(record)) << "];\n";
+    std::cout << "  " << quote("service:" + name) << " [shape=hexagon, label=" << dot_label({name, described(record)}) << "];\n";
   std::cout << "}\n";
   return kOk;
 }

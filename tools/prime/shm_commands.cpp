@@ -13,6 +13,7 @@
 #include <sstream>
 #include <thread>
 
+#include "dot.hpp"
 #include "json.hpp"
 #include "message_text.hpp"
 #include "prime/shm.hpp"
@@ -168,7 +169,9 @@ int shm_ls(const Options& o) {
   const auto seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   auto rate = [&](const shm::RegistrySnapshot::Topic& t) {
     const auto* before = find_topic(first, t.name);
-    return before ? static_cast<double>(t.published - before->published) / seconds : 0.0;
+    // A topic made again meanwhile (its count began anew) shows no rate, not a wrapped one.
+    return before && t.published >= before->published ? static_cast<double>(t.published - before->published) / seconds
+                                                      : 0.0;
   };
   if (o.json) {
     std::string out = "{\"domain\":" + quote(o.domain) + ",\"participants\":[";
@@ -432,16 +435,16 @@ int shm_graph(const Options& o) {
   std::ostringstream out;
   out << "digraph prime {\n  rankdir=LR;\n  label=" << quote("shm domain " + o.domain) << ";\n";
   for (const auto& [pid, names] : processes)
-    out << "  \"pid" << pid << "\" [shape=box, label=" << quote(names + "\\npid " + std::to_string(pid)) << "];\n";
+    out << "  \"pid" << pid << "\" [shape=box, label=" << dot_label({names, "pid " + std::to_string(pid)}) << "];\n";
   for (const auto& t : s.topics) {
-    out << "  " << quote("topic:" + t.name) << " [shape=ellipse, label=" << quote(t.name + "\\n" + short_type(t.type)) << "];\n";
+    out << "  " << quote("topic:" + t.name) << " [shape=ellipse, label=" << dot_label({t.name, short_type(t.type)}) << "];\n";
     if (t.publisher_pid) out << "  \"pid" << t.publisher_pid << "\" -> " << quote("topic:" + t.name) << " [label=\"publishes\"];\n";
     for (const auto pid : std::set<std::uint32_t>(t.subscriber_pids.begin(), t.subscriber_pids.end()))
       out << "  " << quote("topic:" + t.name) << " -> \"pid" << pid << "\" [label=\"subscribes\"];\n";
   }
   for (const auto& v : s.services) {
     out << "  " << quote("service:" + v.name) << " [shape=hexagon, label="
-        << quote(v.name + "\\n" + short_type(v.request_type) + " -> " + short_type(v.reply_type)) << "];\n";
+        << dot_label({v.name, short_type(v.request_type) + " -> " + short_type(v.reply_type)}) << "];\n";
     if (v.server_pid) out << "  " << quote("service:" + v.name) << " -> \"pid" << v.server_pid << "\" [label=\"served by\"];\n";
     for (const auto pid : std::set<std::uint32_t>(v.client_pids.begin(), v.client_pids.end()))
       out << "  \"pid" << pid << "\" -> " << quote("service:" + v.name) << " [label=\"calls\"];\n";
