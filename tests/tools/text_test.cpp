@@ -1,11 +1,13 @@
-// What `prime pub` and `prime call` read from the command line (JSON) and
-// what `prime graph` writes (DOT labels), from text alone.
+// What `prime pub` and `prime call` read from the command line (JSON), how
+// far a type's description reaches, and what `prime graph` writes (DOT
+// labels), from text alone.
 #include <gtest/gtest.h>
 
 #include <string>
 
 #include "dot.hpp"
 #include "json.hpp"
+#include "message_text.hpp"
 
 namespace prime::tool {
 namespace {
@@ -23,6 +25,16 @@ TEST(Json, EscapesInAStringAreTheCharactersTheyStandFor) {
 TEST(Dot, ALabelsLinesAreJoinedByALineBreakAndEachIsEscaped) {
   EXPECT_EQ(dot_label({"planner", "Path -> Pose"}), R"("planner\nPath -> Pose")");
   EXPECT_EQ(dot_label({"a \"quoted\" name"}), R"("a \"quoted\" name")");
+}
+
+// How far a description reaches into a message: what a damaged or foreign
+// one is checked by before a tool reads or writes by it.
+TEST(MessageText, ADescriptionReachesAsFarAsItsFarthestField) {
+  EXPECT_EQ(extent(*parse_layout("{x@0:f64,y@8:f64,n@16:u32}")), 20u);
+  EXPECT_EQ(extent(*parse_layout("{frame@8:str16@0,4}")), 28u);
+  EXPECT_EQ(extent(*parse_layout("{far@4096:f64}")), 4104u) << "wherever the text says";
+  EXPECT_EQ(extent(*parse_layout("{v@0:vec4@0,8,4(f64)}")), ~std::size_t{0}) << "an element wider than its stride";
+  EXPECT_EQ(extent(*parse_layout("{a@0:arr18446744073709551615,8(f64)}")), ~std::size_t{0}) << "no wrap-around";
 }
 
 }  // namespace

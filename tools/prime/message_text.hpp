@@ -4,6 +4,7 @@
 // type's description (prime::schema_of) gives, values read from bytes as
 // YAML-like lines or JSON, and bytes built from JSON.
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -166,7 +167,47 @@ inline std::size_t count_at(const Layout& t, const std::byte* data) {
   return n > t.capacity ? t.capacity : n;  // never read past the storage, whatever the bytes say
 }
 
+// a × b, or the most a size can be when that overflows.
+inline std::size_t times(std::size_t a, std::size_t b) {
+  std::size_t out = 0;
+  return __builtin_mul_overflow(a, b, &out) ? ~std::size_t{0} : out;
+}
+inline std::size_t plus(std::size_t a, std::size_t b) {
+  std::size_t out = 0;
+  return __builtin_add_overflow(a, b, &out) ? ~std::size_t{0} : out;
+}
+
 }  // namespace detail
+
+// How many bytes of a message a value of layout `t` reaches; the most a
+// size can be when its parts do not fit in one another (an element wider
+// than its stride). A description is text a topic's creator wrote: one
+// from a damaged or foreign program must not send a read or a write past
+// the message.
+inline std::size_t extent(const Layout& t) {
+  using detail::plus;
+  using detail::times;
+  constexpr auto kNever = ~std::size_t{0};
+  switch (t.kind) {
+    case Layout::Kind::number: return t.number.size() == 2 ? 1 : t.number.ends_with("16") ? 2 : t.number.ends_with("32") ? 4 : 8;
+    case Layout::Kind::boolean:
+    case Layout::Kind::character: return 1;
+    case Layout::Kind::text: return std::max(plus(t.size_offset, 4), plus(t.data_offset, t.capacity));
+    case Layout::Kind::vector:
+      if (!t.element || extent(*t.element) > t.stride) return kNever;
+      return std::max(plus(t.size_offset, 8), plus(t.data_offset, times(t.capacity, t.stride)));
+    case Layout::Kind::array:
+      if (!t.element || extent(*t.element) > t.stride) return kNever;
+      return times(t.capacity, t.stride);
+    case Layout::Kind::record: {
+      std::size_t most = 0;
+      for (const auto& f : t.fields) most = std::max(most, f.type ? plus(f.offset, extent(*f.type)) : kNever);
+      return most;
+    }
+    case Layout::Kind::opaque: return t.size;
+  }
+  return kNever;
+}
 
 // The layout `description` (prime::schema_of's text) gives.
 inline std::shared_ptr<const Layout> parse_layout(std::string_view description) {

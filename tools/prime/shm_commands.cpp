@@ -326,6 +326,7 @@ int shm_echo(const Options& o) {
   } catch (const std::exception&) {
   }
   const bool described = layout && layout->kind != Layout::Kind::opaque;
+  const auto reach = described ? extent(*layout) : 0;
   finish_on_ctrl_c();
   std::size_t seen = 0;
   const auto first_by = o.timeout > 0 ? Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.timeout))
@@ -341,12 +342,13 @@ int shm_echo(const Options& o) {
     }
     ++seen;
     const auto bytes = sample->value.bytes();
+    const bool by_fields = described && reach <= bytes.size();  // a sample shorter than its description: as bytes
     const auto stamp_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(sample->stamp.time_since_epoch()).count();
     if (o.json) {
       std::cout << "{\"sequence\":" << sample->value.sequence() << ",\"stamp_ns\":" << stamp_ns << ",\"size\":" << bytes.size()
-                << (described ? ",\"value\":" + to_json(*layout, bytes.data()) : ",\"bytes\":" + quote(hex(bytes, bytes.size())))
+                << (by_fields ? ",\"value\":" + to_json(*layout, bytes.data()) : ",\"bytes\":" + quote(hex(bytes, bytes.size())))
                 << "}" << std::endl;
-    } else if (described) {
+    } else if (by_fields) {
       if (layout->kind == Layout::Kind::record) print_fields(std::cout, *layout, bytes.data());
       else std::cout << "value: " << to_json(*layout, bytes.data()) << '\n';
       std::cout << "---" << std::endl;
@@ -366,6 +368,9 @@ std::vector<std::byte> build(const std::string& schema, std::size_t size, const 
   const auto layout = parse_layout(schema);
   if (layout->kind != Layout::Kind::record)
     throw Failure{{Errc::type_mismatch, "its type has no description (PRIME_DESCRIBE next to the type): it cannot be built from text"}};
+  if (extent(*layout) > size)
+    throw Failure{{Errc::type_mismatch, "its description reaches past its " + std::to_string(size) +
+                                            "-byte messages (damaged, or written by a foreign program): '" + schema + "'"}};
   const auto value = words.size() == 1 && !words[0].empty() && words[0][0] == '{' ? parse_json(words[0]) : from_assignments(words);
   std::vector<std::byte> bytes(size);
   fill(*layout, bytes.data(), value);
@@ -412,6 +417,7 @@ int shm_call(const Options& o) {
   std::shared_ptr<const Layout> layout;
   try {
     layout = parse_layout(v->reply_schema);
+    if (extent(*layout) > reply.size()) layout = nullptr;  // an answer shorter than its description: as bytes
   } catch (const std::exception&) {
   }
   if (o.json) {
