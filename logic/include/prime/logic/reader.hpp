@@ -75,7 +75,7 @@ class Reader {
   template <class Rep, class Period>
   [[nodiscard]] std::expected<Sample<T>, Error> read_for(std::chrono::duration<Rep, Period> timeout,
                                                          std::stop_token stop = {}) {
-    return read_until(Clock::now() + timeout, std::move(stop));
+    return read_until(deadline_after(timeout), std::move(stop));
   }
 
   // Appends to `out` what is unread, at most `max` values, after waiting as

@@ -15,4 +15,15 @@ struct Sample {
   Clock::time_point stamp;
 };
 
+// The time `wait` after now: Clock::time_point::max() for a wait longer than
+// the clock has left (a "forever" such as milliseconds::max(), which added
+// as it is would overflow into the past and end the wait at once).
+template <class Rep, class Period>
+[[nodiscard]] Clock::time_point deadline_after(std::chrono::duration<Rep, Period> wait) {
+  const auto now = Clock::now();
+  const std::chrono::duration<double> left = Clock::time_point::max() - now;
+  if (std::chrono::duration<double>{wait} >= left) return Clock::time_point::max();
+  return now + std::chrono::duration_cast<Clock::duration>(wait);
+}
+
 }  // namespace prime

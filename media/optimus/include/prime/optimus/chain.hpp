@@ -48,7 +48,10 @@ inline std::expected<std::string, Error> call_segment(const Segment& segment, st
   auto lease = segment.pool->acquire();
   if (!lease) return std::unexpected(Error{lease.error().code, what() + ": " + lease.error().message});
   auto& connection = **lease;
-  const auto remaining = std::chrono::duration_cast<std::chrono::microseconds>(deadline - Clock::now());
+  // A day at most on the wire: a deadline of time_point::max() ("never")
+  // would overflow the system clock's deadline sent with the request.
+  const auto remaining = std::min<std::chrono::microseconds>(
+      std::chrono::duration_cast<std::chrono::microseconds>(deadline - Clock::now()), std::chrono::hours{24});
   if (remaining.count() <= 0) return std::unexpected(Error{Errc::timeout, what() + ": the deadline passed before the call"});
 
   const auto id = segment.pool->next_id();
@@ -129,7 +132,7 @@ class Chain {
   // Throws prime::Failure when the call fails: a timeout, an unreachable
   // server, a service's block that threw (Errc::block_failed, its message).
   Out operator()(In in) const {
-    auto out = call(in, Clock::now() + timeout_);
+    auto out = call(in, deadline_after(timeout_));
     if (!out) throw Failure{std::move(out.error())};
     return std::move(*out);
   }
@@ -145,7 +148,7 @@ class Chain {
     const auto& last = segments_->back();
     return decode_message<Out>(payload, "reply of service '" + last.names.back() + "'");
   }
-  [[nodiscard]] std::expected<Out, Error> call(const In& in) const { return call(in, Clock::now() + timeout_); }
+  [[nodiscard]] std::expected<Out, Error> call(const In& in) const { return call(in, deadline_after(timeout_)); }
 
   // The same chain with another deadline per call.
   [[nodiscard]] Chain with_timeout(std::chrono::milliseconds timeout) const {

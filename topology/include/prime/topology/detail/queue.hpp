@@ -56,7 +56,7 @@ class Queue {
         result = Pushed::dropped_oldest;
       } else {
         ++waiting_writers_;
-        const bool room = not_full_.wait_until(lock, stop, Clock::now() + block_timeout_,
+        const bool room = not_full_.wait_until(lock, stop, deadline_after(block_timeout_),
                                                [&] { return size_ < slots_.size() || closed_; });
         --waiting_writers_;
         if (closed_) return Pushed::closed;

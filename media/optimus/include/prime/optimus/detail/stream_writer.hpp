@@ -83,7 +83,7 @@ class StreamState {
       if (!done) return std::unexpected(std::move(done.error()));
       return {};
     }
-    const auto give_up = Clock::now() + qos_.block_timeout;
+    const auto give_up = deadline_after(qos_.block_timeout);
     auto pause = std::chrono::microseconds{50};
     while (true) {
       const bool late = Clock::now() >= give_up;

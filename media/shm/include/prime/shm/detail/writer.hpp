@@ -425,7 +425,7 @@ class Writer {
       h.space_wanted.store(~0ull, std::memory_order_relaxed);
     };
     const auto waited = prime::detail::spin_then_sleep(room, sleep, std::chrono::microseconds{50},
-                                                       Clock::now() + block_timeout_, std::stop_token{});
+                                                       deadline_after(block_timeout_), std::stop_token{});
     if (waited == prime::detail::Waited::ready) return;
     give_up_on_laggards(needed);
   }
