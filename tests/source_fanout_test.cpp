@@ -3,15 +3,18 @@
 // publisher.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <set>
+#include <stdexcept>
 #include <thread>
 #include <vector>
 
+#include "prime/liberty.hpp"
 #include "prime/topology/local_source.hpp"
 #include "support/threads.hpp"
 
@@ -178,6 +181,47 @@ TEST_F(SourceFanOut, ReadersOnTheirOwnThreadsGetEveryValueIntactAndMakeOneCopyFe
   EXPECT_EQ(intact, kReaders * kValues);
   EXPECT_EQ(Counted::copies, (kReaders - 1) * kValues) << "each reader but the last needs a copy of its own";
   for (const auto& id : Counted::copied_on) EXPECT_TRUE(reader_threads.contains(id)) << "a copy made off the readers' threads";
+}
+
+// A value whose copy throws when told to.
+struct Fragile {
+  static inline std::atomic<bool> copies_fail = false;
+  int v = 0;
+  explicit Fragile(int value) : v{value} {}
+  Fragile(const Fragile& other) : v{other.v} {
+    if (copies_fail) throw std::runtime_error{"no memory for a copy"};
+  }
+  Fragile(Fragile&&) noexcept = default;
+  Fragile& operator=(const Fragile&) = default;
+  Fragile& operator=(Fragile&&) noexcept = default;
+};
+
+// Two chains after one source: one reader's copy throws. That value is lost
+// to that reader, which says so; nothing else is, and the worker goes on.
+TEST(SourceFanOutFaults, AReadersCopyThatThrowsLosesThatValueToItAlone) {
+  liberty::Core core;
+  Event<Fragile> event;
+  auto errors = core.errors().subscribe();
+  auto input = core.source(event, "input");
+  auto first = (input | core.chain([](Fragile f) { return f.v; }, "first")).subscribe();
+  auto second = (input | core.chain([](Fragile f) { return f.v; }, "second")).subscribe();
+  Fragile::copies_fail = true;
+  event.emit(Fragile{1});
+  auto report = errors.read_for(5s);
+  ASSERT_TRUE(report);
+  EXPECT_NE(report->value.message.find("no memory for a copy"), std::string::npos) << report->value.describe();
+  Fragile::copies_fail = false;
+  event.emit(Fragile{2});
+  std::vector<int> got;
+  for (auto* reader : {&first, &second})
+    while (true) {
+      auto value = reader->read_for(5s);
+      ASSERT_TRUE(value) << value.error().describe();
+      got.push_back(value->value);
+      if (value->value == 2) break;
+    }
+  std::sort(got.begin(), got.end());
+  EXPECT_EQ(got, (std::vector<int>{1, 2, 2})) << "1 reached the reader that got it moved, 2 both";
 }
 
 }  // namespace

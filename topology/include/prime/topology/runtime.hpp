@@ -61,7 +61,8 @@ namespace detail {
 
 // Runs `on_sample(sample, stop)` for every value `reader` gets, in a worker of
 // `runtime`, until that runtime stops. What `on_sample` throws is reported
-// under `what`, and the worker goes on with the next value.
+// under `what`, and the worker goes on with the next value; so is what
+// taking a value throws (its copy for this reader), which loses that value.
 template <class T, class F>
 void spawn_reader(const std::weak_ptr<RuntimeState>& runtime, Reader<T> reader, std::string what,
                   F on_sample) {
@@ -72,17 +73,26 @@ void spawn_reader(const std::weak_ptr<RuntimeState>& runtime, Reader<T> reader, 
     constexpr std::size_t kBatch = 64;  // values taken per wake-up when the source is busy
     std::vector<Sample<T>> batch;
     batch.reserve(kBatch);
+    auto report = [&](const std::string& why) {
+      if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": " + why});
+    };
     while (true) {
       batch.clear();
-      if (!reader.read_some(batch, kBatch, Clock::time_point::max(), stop)) return;  // only a stop ends it
+      try {
+        if (!reader.read_some(batch, kBatch, Clock::time_point::max(), stop)) return;  // only a stop ends it
+      } catch (const std::exception& e) {
+        report(std::string{"a value could not be taken (lost to this reader): "} + e.what());
+      } catch (...) {
+        report("a value could not be taken (lost to this reader): an exception of unknown type");
+      }
       for (auto& sample : batch) {
         if (stop.stop_requested()) return;
         try {
           on_sample(std::move(sample), stop);
         } catch (const std::exception& e) {
-          if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": " + e.what()});
+          report(e.what());
         } catch (...) {
-          if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": an exception of unknown type"});
+          report("an exception of unknown type");
         }
       }
     }

@@ -6,6 +6,7 @@
 #include <concepts>
 #include <condition_variable>
 #include <cstdint>
+#include <exception>
 #include <expected>
 #include <mutex>
 #include <optional>
@@ -91,7 +92,9 @@ class Queue {
   }
 
   // Waits for one value, then takes up to `max` under one lock, wakes the
-  // waiting writers once for all of them, and moves them into `out`.
+  // waiting writers once for all of them, and moves them into `out`. A value
+  // whose copy for this reader throws is lost to it: the others still go
+  // into `out`, and the first exception is rethrown after.
   [[nodiscard]] std::expected<std::size_t, Errc> pop_some(std::vector<Sample<T>>& out, std::size_t max,
                                                           Clock::time_point deadline, std::stop_token stop) {
     std::unique_lock lock{mutex_};
@@ -99,9 +102,18 @@ class Queue {
     taken_.clear();
     while (taken_.size() < max && size_ > 0) taken_.push_back(take_front());
     wake_writers(lock);
-    for (auto& entry : taken_) out.push_back(resolve(std::move(entry)));
-    const auto n = taken_.size();
+    std::exception_ptr failed;
+    std::size_t n = 0;
+    for (auto& entry : taken_) {
+      try {
+        out.push_back(resolve(std::move(entry)));
+        ++n;
+      } catch (...) {
+        if (!failed) failed = std::current_exception();
+      }
+    }
     taken_.clear();
+    if (failed) std::rethrow_exception(failed);
     return n;
   }
 
