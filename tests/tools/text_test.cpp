@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <string>
+#include <vector>
 
 #include "dot.hpp"
 #include "json.hpp"
@@ -31,10 +32,29 @@ TEST(Dot, ALabelsLinesAreJoinedByALineBreakAndEachIsEscaped) {
 // one is checked by before a tool reads or writes by it.
 TEST(MessageText, ADescriptionReachesAsFarAsItsFarthestField) {
   EXPECT_EQ(extent(*parse_layout("{x@0:f64,y@8:f64,n@16:u32}")), 20u);
-  EXPECT_EQ(extent(*parse_layout("{frame@8:str16@0,4}")), 28u);
+  EXPECT_EQ(extent(*parse_layout("{frame@8:str16@0,4}")), 29u) << "sixteen characters and a '\\0'";
   EXPECT_EQ(extent(*parse_layout("{far@4096:f64}")), 4104u) << "wherever the text says";
   EXPECT_EQ(extent(*parse_layout("{v@0:vec4@0,8,4(f64)}")), ~std::size_t{0}) << "an element wider than its stride";
   EXPECT_EQ(extent(*parse_layout("{a@0:arr18446744073709551615,8(f64)}")), ~std::size_t{0}) << "no wrap-around";
+}
+
+// A number given for a field of an integer type is a whole number within
+// its range, or an error naming the field, the number and the range.
+TEST(MessageText, ANumberOutsideItsFieldsRangeIsRefusedByName) {
+  const auto layout = parse_layout("{level@0:u8,offset@8:i64}");
+  std::vector<std::byte> bytes(16);
+  auto fill_with = [&](const std::string& json) { fill(*layout, bytes.data(), parse_json(json)); };
+  EXPECT_NO_THROW(fill_with(R"({"level": 255, "offset": -3})"));
+  EXPECT_EQ(static_cast<int>(bytes[0]), 255);
+  try {
+    fill_with(R"({"level": 300})");
+    ADD_FAILURE() << "300 went into a u8";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string{e.what()}.find("level: 300 is not a whole number from 0 to 255 (u8)"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(fill_with(R"({"level": -1})"), std::invalid_argument);
+  EXPECT_THROW(fill_with(R"({"level": 1.5})"), std::invalid_argument);
+  EXPECT_THROW(fill_with(R"({"offset": 1e30})"), std::invalid_argument);
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 // YAML-like lines or JSON, and bytes built from JSON.
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -192,7 +193,7 @@ inline std::size_t extent(const Layout& t) {
     case Layout::Kind::number: return t.number.size() == 2 ? 1 : t.number.ends_with("16") ? 2 : t.number.ends_with("32") ? 4 : 8;
     case Layout::Kind::boolean:
     case Layout::Kind::character: return 1;
-    case Layout::Kind::text: return std::max(plus(t.size_offset, 4), plus(t.data_offset, t.capacity));
+    case Layout::Kind::text: return std::max(plus(t.size_offset, 4), plus(t.data_offset, plus(t.capacity, 1)));  // and its '\0'
     case Layout::Kind::vector:
       if (!t.element || extent(*t.element) > t.stride) return kNever;
       return std::max(plus(t.size_offset, 8), plus(t.data_offset, times(t.capacity, t.stride)));
@@ -271,6 +272,14 @@ inline void print_fields(std::ostream& out, const Layout& t, const std::byte* da
   }
 }
 
+// A number as a person writes it: no exponent for a whole one.
+inline std::string number_words(double v) {
+  std::ostringstream out;
+  if (v == std::floor(v) && std::fabs(v) < 1e19) out << std::fixed << std::setprecision(0);
+  out << v;
+  return out.str();
+}
+
 // Writes `value` into the message at `data`, as the layout says; throws
 // std::invalid_argument naming the field (`where`) that does not fit.
 inline void fill(const Layout& t, std::byte* data, const Json& value, const std::string& where = "the message") {
@@ -292,6 +301,15 @@ inline void fill(const Layout& t, std::byte* data, const Json& value, const std:
     case K::number: {
       const auto v = number();
       const auto& n = t.number;
+      if (n[0] != 'f') {  // a whole number within the type's range, or an error naming both
+        const int bits = std::stoi(n.substr(1));
+        const bool is_signed = n[0] == 'i';
+        const double low = is_signed ? -std::ldexp(1.0, bits - 1) : 0.0;
+        const double high = std::ldexp(1.0, is_signed ? bits - 1 : bits);  // the first value past the range
+        if (v != std::floor(v) || v < low || v >= high)
+          wrong(number_words(v) + " is not a whole number from " + number_words(low) + " to " + number_words(high - 1) +
+                " (" + n + ")");
+      }
       if (n == "f64") detail::store(data, v);
       else if (n == "f32") detail::store(data, static_cast<float>(v));
       else if (n == "i8") detail::store(data, static_cast<std::int8_t>(v));
