@@ -277,7 +277,7 @@ TEST_F(ServiceTest, AServiceHeaderWrittenAfterItWasCheckedSendsNoAccessOutOfTheS
       << too_big.error().describe();
   const auto too_long = twice.call(sixty);
   ASSERT_FALSE(too_long) << "120 bytes do not fit the service's replies as it was made";
-  EXPECT_NE(too_long.error().message.find("a reply of 120 bytes exceeds max_reply_size (100 bytes)"), std::string::npos)
+  EXPECT_NE(too_long.error().message.find("a reply of 120 bytes exceeds the 100 bytes it may take (this service's max_reply_size"), std::string::npos)
       << too_long.error().describe();
 
   // A participant that maps it afresh finds the damage, and says so.

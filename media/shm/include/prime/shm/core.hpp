@@ -195,9 +195,7 @@ class Core : public ErasedChainRuntime {
                                                                       std::byte* out, std::size_t capacity) -> std::size_t {
       if constexpr (std::is_same_v<Reply, Bytes>) {
         const auto reply = std::invoke(block, detail::Wire<Request>::view(request, size));
-        if (reply.size() > capacity)
-          throw Failure{{Errc::limit_exceeded, "a reply of " + std::to_string(reply.size()) +
-                                                   " bytes exceeds max_reply_size (" + std::to_string(capacity) + " bytes)"}};
+        if (reply.size() > capacity) throw reply_too_large(reply.size(), capacity);
         if (!reply.empty()) std::memcpy(out, reply.data(), reply.size());
         return reply.size();
       } else {
@@ -219,9 +217,7 @@ class Core : public ErasedChainRuntime {
                                                                std::size_t capacity) -> std::size_t {
       if constexpr (std::is_same_v<Out, Bytes>) {
         const std::size_t n = std::invoke(block, detail::Wire<In>::view(request, size), std::span<std::byte>{out, capacity});
-        if (n > capacity)
-          throw Failure{{Errc::limit_exceeded, "a reply of " + std::to_string(n) + " bytes exceeds max_reply_size (" +
-                                                   std::to_string(capacity) + " bytes)"}};
+        if (n > capacity) throw reply_too_large(n, capacity);
         return n;
       } else {
         auto* reply = ::new (out) Out;
@@ -282,6 +278,14 @@ class Core : public ErasedChainRuntime {
   [[nodiscard]] const std::string& domain() const noexcept { return registry_->domain(); }
 
  private:
+  // A raw reply larger than its room: this service's max_reply_size, or, in
+  // a linked call, the next service's max_request_size (its output is
+  // written straight into that service's request).
+  static Failure reply_too_large(std::size_t size, std::size_t room) {
+    return Failure{{Errc::limit_exceeded, "a reply of " + std::to_string(size) + " bytes exceeds the " +
+                                              std::to_string(room) + " bytes it may take (this service's max_reply_size, "
+                                              "or in a linked call the next service's max_request_size)"}};
+  }
   template <Message T>
   std::shared_ptr<detail::Topic> open(const std::string& name, const TopicQos& asked, const char* side) {
     const auto type = Fingerprint::of<T>();
