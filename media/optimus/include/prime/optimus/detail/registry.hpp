@@ -31,13 +31,20 @@ inline void register_types(Pool& pool, const std::string& registry, const std::s
   auto existing = c.command({"HGET", registry, name});
   if (!existing) throw Failure{{existing.error().code, what + ": " + existing.error().message}};
   if (is_error(**existing)) throw Failure{server_error(**existing, what + ": reading the registry")};
-  if (!is_nil(**existing) && text(**existing) != record)
-    throw Failure{{Errc::type_mismatch, what + " is registered as " + std::string{text(**existing)} +
-                                            ", not as " + record}};
+  const auto mismatch = [&](std::string_view found) {
+    return Failure{{Errc::type_mismatch, what + " is registered as " + std::string{found} + ", not as " + record}};
+  };
+  if (!is_nil(**existing) && text(**existing) != record) throw mismatch(text(**existing));
   if (!write || !is_nil(**existing)) return;
-  auto done = c.command({"HSET", registry, name, record});
+  // Set only if still unset: of two processes registering at once with
+  // other types, the second learns of the first's.
+  auto done = c.command({"HSETNX", registry, name, record});
   if (!done) throw Failure{{done.error().code, what + ": " + done.error().message}};
   if (is_error(**done)) throw Failure{server_error(**done, what + ": writing the registry")};
+  if ((**done).integer == 1) return;
+  auto now = c.command({"HGET", registry, name});
+  if (!now) throw Failure{{now.error().code, what + ": " + now.error().message}};
+  if (!is_error(**now) && !is_nil(**now) && text(**now) != record) throw mismatch(text(**now));
 }
 
 }  // namespace prime::optimus::detail
