@@ -75,6 +75,28 @@ TEST(ShmServiceProcesses, AServiceKilledMidCallIsReportedDeadToItsCallerWithin10
   EXPECT_LT(returned - killed, 100ms) << "told within 100 ms, not at the 30 s timeout";
 }
 
+// No one waits for a post's answer or releases its cell but the worker
+// running it: a server killed while it runs a post leaves the cell to the
+// next server, which frees it, so the client keeps all its calls in flight.
+TEST(ShmServiceProcesses, APostRunningWhenItsServerIsKilledIsFreedByTheNextServer) {
+  const auto domain = unique_domain("dead-post");
+  shm::Core core{domain};
+  auto stuck = core.chain<std::int64_t, std::int64_t>("stuck");
+  {
+    PeerProcess server{{"serve", domain, "stuck", "hang"}};
+    ASSERT_TRUE(server.says("serving"));
+    ASSERT_TRUE(stuck.post(1));
+    ASSERT_TRUE(server.says("running")) << "the service runs the post";
+    server.kill9();
+  }
+  PeerProcess next{{"serve", domain, "stuck", "hang"}};
+  ASSERT_TRUE(next.says("serving"));
+  for (int i = 0; i < 4; ++i) {  // calls_per_client, all at once: the next server answers none
+    auto posted = stuck.post(10 + i);
+    EXPECT_TRUE(posted) << i << ": " << posted.error().describe();
+  }
+}
+
 TEST(ShmServiceProcesses, ARestartedServiceIsFoundAgainByTheSameHandle) {
   const auto domain = unique_domain("restart");
   shm::Core core{domain};

@@ -286,8 +286,12 @@ class Server {
       const auto ticket = Status::ticket(s);
       switch (Status::state(s)) {
         case CellState::running: {
-          write_error(c, service_->tail(i), {Errc::peer_dead, "service '" + service_->name() + "': its server died while running this call"});
           auto running = s;
+          if (c.posted) {  // no one waits for a post's answer, nor releases its cell: freed here
+            c.status.compare_exchange_strong(running, Status::pack(ticket + 1, CellState::free));
+            break;
+          }
+          write_error(c, service_->tail(i), {Errc::peer_dead, "service '" + service_->name() + "': its server died while running this call"});
           if (c.status.compare_exchange_strong(running, Status::pack(ticket, CellState::failed))) service_->tail(i).answered.ring();
           break;
         }
