@@ -324,6 +324,11 @@ TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndHzMeasuresASource) {
   const auto no_scheme = prime(domain, {"--redis", "127.0.0.1:1", "ls"});
   EXPECT_EQ(no_scheme.code, 5);
   EXPECT_NE(no_scheme.out.find("bad server URL '127.0.0.1:1'"), std::string::npos) << no_scheme.out;
+
+  // echo on a source nothing is published on gives up at its --timeout.
+  const auto quiet = prime(domain, {"--redis", server.url(), "echo", "ticks", "--timeout", "0.3"});
+  EXPECT_EQ(quiet.code, 4) << quiet.out;
+  EXPECT_NE(quiet.out.find("nothing published on 'ticks' within 0.3 s"), std::string::npos) << quiet.out;
 }
 
 }  // namespace

@@ -23,15 +23,17 @@
 namespace prime::tool {
 
 namespace {
-
-using namespace std::chrono_literals;
-
 std::atomic<bool> stop_requested{false};
+}  // namespace
 
-// From now on Ctrl-C ends the command's loop instead of the process.
 void finish_on_ctrl_c() {
   std::signal(SIGINT, [](int) { stop_requested = true; });
 }
+bool ctrl_c_pressed() { return stop_requested; }
+
+namespace {
+
+using namespace std::chrono_literals;
 
 // "prime::test::Pose (32 bytes, align 8, layout 1)" -> "prime::test::Pose"
 std::string short_type(const std::string& described) { return described.substr(0, described.find(" (")); }

@@ -23,6 +23,11 @@ struct Options {
   bool all = false;                 // clean: every domain
 };
 
+// From now on Ctrl-C ends the command's loop (ctrl_c_pressed()) instead of
+// the process, so it finishes its report.
+void finish_on_ctrl_c();
+bool ctrl_c_pressed();
+
 // What a command's exit code says.
 enum Exit : int { kOk = 0, kFailed = 1, kUsage = 2, kNotFound = 3, kNothing = 4, kUnreachable = 5 };
 
