@@ -50,6 +50,16 @@ class SourceTest : public MediumTest<M> {
     const auto t0 = Clock::now();
     test::play(scenario, t0, [&](int input, int ms) { (input == 0 ? lidar : odom).emit(ms, at(t0, ms)); }, reader);
   }
+  // `source` linked to a chain "check" that throws "negative range" for a value below 0.
+  template <class S>
+  auto checked(const S& source) {
+    return source | this->core->chain(
+                        [](int x) {
+                          if (x < 0) throw std::invalid_argument{"negative range"};
+                          return x;
+                        },
+                        "check");
+  }
 };
 TYPED_TEST_SUITE(SourceTest, Media, MediumName);
 
@@ -213,13 +223,7 @@ TYPED_TEST(SourceTest, AWorkerReportsABlocksExceptionAndKeepsRunning) {
   auto& core = *this->core;
   auto errors = core.errors().subscribe();
   auto lidar = this->template feed<int>("lidar");
-  auto checked = lidar.source | core.chain(
-                                    [](int x) {
-                                      if (x < 0) throw std::invalid_argument{"negative range"};
-                                      return x;
-                                    },
-                                    "check");
-  auto reader = checked.subscribe();
+  auto reader = this->checked(lidar.source).subscribe();
   lidar.emit(-1);
   lidar.emit(7);
   auto value = reader.read_for(kPatience);
@@ -240,13 +244,7 @@ TYPED_TEST(SourceTest, AnErrorSourceThatNeverMakesRoomHoldsNoWorkerForever) {
   auto& core = *this->core;
   auto stalled = core.errors({.capacity = 1, .overflow = Overflow::block, .block_timeout = 20ms}).subscribe();
   auto lidar = this->template feed<int>("lidar");
-  auto checked = lidar.source | core.chain(
-                                    [](int x) {
-                                      if (x < 0) throw std::invalid_argument{"negative range"};
-                                      return x;
-                                    },
-                                    "check");
-  auto reader = checked.subscribe();
+  auto reader = this->checked(lidar.source).subscribe();
   lidar.emit(-1);  // fills the error source
   lidar.emit(-2);  // finds no room
   lidar.emit(7);

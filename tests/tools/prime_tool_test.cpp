@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -45,6 +46,15 @@ tool::Json last_json(const std::string& text) {
     at = nl == std::string::npos ? text.size() : nl + 1;
   }
   return tool::parse_json(last);
+}
+
+// A domain whose one process, which made topic "old", was killed with kill -9.
+std::string killed_domain(const std::string& stem) {
+  const auto dead = unique_domain(stem);
+  PeerProcess crashed{{"leave_segments", dead, "old"}};
+  if (!crashed.says("created")) throw std::runtime_error{"the peer made no topic"};
+  crashed.kill9();
+  return dead;
 }
 
 double number(const tool::Json& j, const std::string& key) { return std::get<double>(j.object().at(key).value); }
@@ -179,12 +189,7 @@ TEST(PrimeTool, GraphNamesEveryEdgeOfAThreeProcessSystem) {
 }
 
 TEST(PrimeTool, CleanRemovesAKilledDomainsSegmentsAndLeavesALiveOneAlone) {
-  const auto dead = unique_domain("tool-dead");
-  {
-    PeerProcess crashed{{"leave_segments", dead, "old"}};
-    ASSERT_TRUE(crashed.says("created"));
-    crashed.kill9();
-  }
+  const auto dead = killed_domain("tool-dead");
   ASSERT_EQ(segments_of(dead), 2);
   const auto cleaned = prime(dead, {"clean"});
   EXPECT_EQ(cleaned.code, 0);
@@ -205,12 +210,7 @@ TEST(PrimeTool, CleanRemovesAKilledDomainsSegmentsAndLeavesALiveOneAlone) {
 // joins only a running system, so it never clears a dead one, as a program
 // of the system joining it does.
 TEST(PrimeTool, ToolsThatJoinADomainLeaveADeadOnesSegmentsAlone) {
-  const auto dead = unique_domain("tool-dead-look");
-  {
-    PeerProcess crashed{{"leave_segments", dead, "old"}};
-    ASSERT_TRUE(crashed.says("created"));
-    crashed.kill9();
-  }
+  const auto dead = killed_domain("tool-dead-look");
   ASSERT_EQ(segments_of(dead), 2);
   for (const auto& args : std::vector<std::vector<std::string>>{{"echo", "old", "-n", "1"}, {"hz", "old", "-n", "1"}}) {
     const auto run = prime(dead, args);
