@@ -229,6 +229,21 @@ TEST_F(OptimusChain, AWorkerWhoseWaitTheServerRefusesSaysWhyAndServesOnceItMay) 
   EXPECT_EQ(echo(9), 9);
 }
 
+// A request the server refuses to queue is an error at once, naming the
+// server's reason, not a wait for an answer that cannot come.
+TEST_F(OptimusChain, ARequestTheServerRefusesIsAnErrorAtOnce) {
+  optimus::Core core{options()};
+  auto echo = core.service<int, int>("refused", {.timeout = 600'000ms});
+  RawRedis raw{shared_redis().url()};
+  raw.command({"SET", domain + ":svc:refused", "a string, not a list"});
+  const auto start = Clock::now();
+  auto refused = echo.call(1);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("WRONGTYPE"), std::string::npos) << refused.error().describe();
+  EXPECT_LT(Clock::now() - start, 60s) << "not the call's 10-minute deadline";
+  raw.command({"DEL", domain + ":svc:refused"});
+}
+
 TEST_F(OptimusChain, AMessageOfTheWrongTypeIsATypeMismatchFromTheService) {
   optimus::Core core{options()};
   (void)core.serve("ints", [](int x) { return x; });

@@ -95,6 +95,9 @@ TEST(PrimeTool, LsAndInfoShowATopicAndAServiceOfRunningPeersWithTypesAndPids) {
   auto fast = core.publisher<int>("tool/fast", {.publish_fence = shm::PublishFence::light});
   const auto light = prime(domain, {"info", "tool/fast"});
   EXPECT_NE(light.out.find("\n  publish_fence: light\n"), std::string::npos) << light.out;
+  const auto info_json = last_json(prime(domain, {"--json", "info", "tool/ticks"}).out);
+  EXPECT_EQ(text(info_json, "name"), "tool/ticks");
+  EXPECT_FALSE(info_json.object().contains("rate")) << "info measures no rate, so it shows none (not 0)";
 
   const auto missing = prime(domain, {"info", "tool/nothing"});
   EXPECT_EQ(missing.code, 3) << "not found";
@@ -113,6 +116,19 @@ TEST(PrimeTool, HzReportsAHundredHertzPublisherWithinTenPercent) {
   const auto rate = number(last_json(hz.out), "rate");
   EXPECT_GT(rate, 90) << hz.out;
   EXPECT_LT(rate, 110) << hz.out;
+}
+
+// A publisher that stops: hz says nothing new arrives, instead of
+// repeating the rate of samples long gone.
+TEST(PrimeTool, HzSaysSoWhenAPublisherStops) {
+  const auto domain = unique_domain("tool-hz-stop");
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "100", "0"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  auto hz = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "hz", "tool/ticks", "--duration", "4"}, true);
+  ASSERT_TRUE(hz.line_starting("average rate: ", 10s)) << "it measured the publisher";
+  ticks.kill9();
+  const auto idle = hz.line_starting("no new samples for ", 10s);
+  ASSERT_TRUE(idle) << "it says the samples stopped";
 }
 
 TEST(PrimeTool, DelayReportsAKnownDelay) {
@@ -159,6 +175,8 @@ TEST(PrimeTool, PubAndCallFromTheTerminalReachASubscriberAndAService) {
   const auto call = prime(domain, {"call", "tool/echo", "who=5", "n=14"});
   EXPECT_EQ(call.code, 0) << call.out;
   EXPECT_EQ(call.out, "who: 5\nn: 42\n");
+  const auto no_rate = prime(domain, {"pub", "tool/cmd", "--rate=-1", "n=1"});
+  EXPECT_EQ(no_rate.code, 2) << "a rate below 0 is a usage error, not a flood: " << no_rate.out;
   const auto wrong = prime(domain, {"pub", "tool/cmd", "speed=1"});
   EXPECT_NE(wrong.code, 0);
   EXPECT_NE(wrong.out.find("no field 'speed' (it has n, x, tag)"), std::string::npos) << wrong.out;

@@ -103,7 +103,8 @@ int main(int argc, char** argv) {
   auto* pub = command("pub", "publish a message built from JSON or field=value words", [&] { return shm_pub(o); });
   pub->add_option("topic", o.name)->required();
   pub->add_option("values", o.values, "{\"x\": 1} or x=1 y=2 pose.theta=0.5")->required();
-  pub->add_option("--rate", o.rate, "publish this many times a second until --count or Ctrl-C (default: once)");
+  pub->add_option("--rate", o.rate, "publish this many times a second until --count or Ctrl-C (default: once)")
+      ->check(CLI::PositiveNumber);
   pub->add_option("-n,--count", o.count, "with --rate: how many");
   auto* call = command("call", "call a service with a request built from JSON or field=value words",
                        [&] { return shm_call(o); });

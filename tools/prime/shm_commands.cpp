@@ -9,6 +9,7 @@
 #include <iomanip>
 #include <iostream>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -75,14 +76,16 @@ const shm::RegistrySnapshot::Service* find_service(const shm::RegistrySnapshot& 
 std::string overflow_name(Overflow o) { return o == Overflow::block ? "block" : "drop_oldest"; }
 std::string fence_name(shm::PublishFence f) { return f == shm::PublishFence::light ? "light" : "full"; }
 
-std::string topic_json(const shm::RegistrySnapshot::Topic& t, double rate) {
+// `rate`: as measured (ls), or none where nothing measured it (info).
+std::string topic_json(const shm::RegistrySnapshot::Topic& t, std::optional<double> rate) {
   return "{\"name\":" + quote(t.name) + ",\"type\":" + quote(t.type) + ",\"capacity\":" + std::to_string(t.qos.capacity) +
          ",\"max_message_size\":" + std::to_string(t.qos.max_message_size) + ",\"overflow\":" +
          quote(overflow_name(t.qos.overflow)) + ",\"publish_fence\":" + quote(fence_name(t.qos.publish_fence)) +
          ",\"max_subscribers\":" + std::to_string(t.qos.max_subscribers) +
          ",\"max_held\":" + std::to_string(t.qos.max_held) + ",\"publisher_pid\":" + std::to_string(t.publisher_pid) +
          ",\"publisher\":" + quote(t.publisher) + ",\"subscriber_pids\":" + json_pids(t.subscriber_pids) +
-         ",\"published\":" + std::to_string(t.published) + ",\"rate\":" + fixed(rate) + ",\"schema\":" + quote(t.schema) + "}";
+         ",\"published\":" + std::to_string(t.published) + (rate ? ",\"rate\":" + fixed(*rate) : std::string{}) +
+         ",\"schema\":" + quote(t.schema) + "}";
 }
 
 std::string service_json(const shm::RegistrySnapshot::Service& v) {
@@ -113,7 +116,9 @@ struct Watch {
 };
 
 // Reads samples until the duration, the count or Ctrl-C; `on_sample` gets
-// each, `report` runs every second and at the end.
+// each, `report` runs every second and at the end. A second with nothing
+// new says so, instead of repeating figures about samples long gone (a
+// publisher that stopped).
 template <class OnSample, class Report>
 int watch_loop(const Options& o, Watch& w, OnSample on_sample, Report report) {
   finish_on_ctrl_c();
@@ -122,15 +127,24 @@ int watch_loop(const Options& o, Watch& w, OnSample on_sample, Report report) {
                                   : Clock::time_point::max();
   auto next_report = start + 1s;
   std::size_t seen = 0, reported = 0;
+  auto last_sample = start;
   while (!stop_requested && Clock::now() < end && (o.count == 0 || seen < o.count)) {
     auto sample = w.reader.read_for(std::min<Clock::duration>(100ms, end - Clock::now()));
     const auto now = Clock::now();
     if (sample) {
       ++seen;
+      last_sample = now;
       on_sample(*sample, now);
     }
     if (now >= next_report) {
-      report(false);
+      if (seen > 0 && seen == reported) {
+        const auto idle = fixed(std::chrono::duration<double>(now - last_sample).count(), 1);
+        std::cout << (o.json ? "{\"topic\":" + quote(o.name) + ",\"no_new_samples_for_s\":" + idle + "}"
+                             : "no new samples for " + idle + " s")
+                  << std::endl;
+      } else {
+        report(false);
+      }
       reported = seen;
       next_report = now + 1s;
     }
@@ -225,7 +239,7 @@ int shm_info(const Options& o) {
   };
   if (const auto* t = find_topic(s, o.name)) {
     if (o.json) {
-      std::cout << topic_json(*t, 0) << '\n';
+      std::cout << topic_json(*t, std::nullopt) << '\n';
       return kOk;
     }
     std::cout << "topic " << t->name << "\n  type: " << t->type << "\n  capacity: " << t->qos.capacity
@@ -392,7 +406,9 @@ int shm_pub(const Options& o) {
   const auto period = o.rate > 0 ? std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1 / o.rate)) : Clock::duration::zero();
   std::size_t sent = 0;
   for (auto next = Clock::now(); !stop_requested; next += period) {
-    std::this_thread::sleep_until(next);
+    while (!stop_requested && Clock::now() < next)  // in steps, so Ctrl-C ends a long period at once
+      std::this_thread::sleep_until(std::min(next, Clock::now() + 100ms));
+    if (stop_requested) break;
     if (auto done = publisher.publish(bytes); !done) throw Failure{done.error()};
     ++sent;
     if (o.rate == 0 || (o.count > 0 && sent >= o.count)) break;

@@ -72,12 +72,16 @@ inline std::expected<std::string, Error> call_segment(const Segment& segment, st
   };
   if (!segment.pool->begin_call(connection)) return stopped();
   auto pushed = connection.reply();
+  if (pushed && is_error(**pushed)) {  // refused (another type under the key, out of memory, an ACL): said at once
+    segment.pool->end_call(connection);
+    lease->discard();  // its BLPOP still waits on the server: the connection goes with it
+    return std::unexpected(server_error(**pushed, what() + ": sending the request"));
+  }
   auto answer = pushed ? connection.reply() : std::expected<Reply, Error>{std::unexpected(pushed.error())};
   segment.pool->end_call(connection);
   if (!answer && segment.pool->calls_closed()) return stopped();
   if (!pushed) return std::unexpected(Error{pushed.error().code, what() + ": " + pushed.error().message});
   if (!answer) return std::unexpected(Error{answer.error().code, what() + ": " + answer.error().message});
-  if (is_error(**pushed)) return std::unexpected(server_error(**pushed, what() + ": sending the request"));
   if (is_error(**answer)) return std::unexpected(server_error(**answer, what() + ": waiting for the reply"));
 
   if (is_nil(**answer)) {
