@@ -97,6 +97,45 @@ TEST(ShmServiceProcesses, APostRunningWhenItsServerIsKilledIsFreedByTheNextServe
   }
 }
 
+// A linked call's worker holds the next service's cell while it runs (its
+// output goes straight there). Killed with its server, it leaves that cell
+// to no one: the caller, told the server died, frees it; for a post, which
+// no caller waits for, the next server does.
+TEST(ShmServiceProcesses, AServerKilledWhileItsOutputGoesOnLeavesTheNextServiceNoCellStuck) {
+  const auto domain = unique_domain("dead-forward");
+  shm::Core core{domain};
+  (void)core.serve("plus", [](const std::int64_t& x) { return x + 1; }, {.calls_per_client = 1});
+  auto plus = core.chain<std::int64_t, std::int64_t>("plus");
+  auto linked = core.chain<std::int64_t, std::int64_t>("stuck", {.timeout = 30s}) | plus;
+  {
+    PeerProcess server{{"serve", domain, "stuck", "hang"}};
+    ASSERT_TRUE(server.says("serving"));
+    std::optional<std::expected<std::int64_t, Error>> result;
+    std::jthread caller{[&] { result = linked.call(1); }};
+    ASSERT_TRUE(server.says("running"));
+    server.kill9();
+    caller.join();
+    ASSERT_TRUE(result && !*result);
+    EXPECT_EQ(result->error().code, Errc::peer_dead) << result->error().describe();
+  }
+  auto direct = plus.call(1);  // plus allows one call in flight per client
+  ASSERT_TRUE(direct) << direct.error().describe();
+  EXPECT_EQ(*direct, 2);
+
+  {
+    PeerProcess server{{"serve", domain, "stuck", "hang"}};
+    ASSERT_TRUE(server.says("serving"));
+    ASSERT_TRUE(linked.post(1));
+    ASSERT_TRUE(server.says("running"));
+    server.kill9();
+  }
+  PeerProcess next{{"serve", domain, "stuck", "hang"}};
+  ASSERT_TRUE(next.says("serving")) << "it took the service over, and what the dead one held";
+  direct = plus.call(2);
+  ASSERT_TRUE(direct) << direct.error().describe();
+  EXPECT_EQ(*direct, 3);
+}
+
 TEST(ShmServiceProcesses, ARestartedServiceIsFoundAgainByTheSameHandle) {
   const auto domain = unique_domain("restart");
   shm::Core core{domain};

@@ -489,6 +489,28 @@ TEST_F(ServiceTest, CallsAfterAPostDownALinkedRouteAreAnsweredOrToldWhy) {
   }
 }
 
+// A post whose first service fails frees every later cell of its route:
+// its caller waits for no answer and releases nothing, so a cell left
+// claimed would cost that client a call in flight at that service for good.
+TEST_F(ServiceTest, APostThatFailsDownALinkedRouteFreesEveryCellOfIt) {
+  core.serve("gate", [](const int& x) {
+    if (x < 0) throw std::invalid_argument{"negative"};
+    return x;
+  });
+  for (const auto* name : {"a", "b", "c"}) core.serve(name, [](const int& x) { return x + 1; }, {.calls_per_client = 1});
+  auto a = core.chain<int, int>("a");
+  auto b = core.chain<int, int>("b");
+  auto c = core.chain<int, int>("c");
+  auto linked = core.chain<int, int>("gate") | a | b | c;
+  ASSERT_TRUE(linked.post(-1));
+  ASSERT_TRUE(MappedTopic::within(10s, [&] { return listed(core, "gate")->failed == 1; }));
+  for (auto* one : {&a, &b, &c}) {  // one call in flight each: refused for as long as the post holds its cell
+    std::expected<int, Error> out = std::unexpected(Error{});
+    EXPECT_TRUE(MappedTopic::within(10s, [&] { return (out = one->call(1)).has_value(); })) << out.error().describe();
+  }
+  EXPECT_EQ(linked(1), 4);
+}
+
 // A server takes a service, then sets its limits: a caller that binds in
 // between finds no timeout set yet, and waits the default, not nothing.
 TEST_F(ServiceTest, ACallToAServiceWhoseLimitsAreNotSetYetWaitsTheDefault) {

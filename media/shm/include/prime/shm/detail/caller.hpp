@@ -279,6 +279,16 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   };
   (void)prime::detail::spin_then_sleep(over, sleep, route.back()->qos().spin, deadline, std::stop_token{}, now);
   if (!answered()) {
+    // A cell a dead server's worker held for its output (forwarding) is held
+    // by no one: taken back, so that releasing frees it rather than leaving
+    // it abandoned to a worker that will never finish.
+    for (std::size_t k = 1; k < held.size(); ++k) {
+      const auto& before = *held[k - 1].service;
+      if (const auto server = before.header().server.load(); server != 0 && before.registry().alive(server)) continue;
+      auto forwarding = Status::pack(held[k].ticket, CellState::forwarding);
+      held[k].service->cell(held[k].cell).status.compare_exchange_strong(forwarding,
+                                                                        Status::pack(held[k].ticket, CellState::claimed));
+    }
     release_all();
     if (gone) return std::unexpected(std::move(*gone));
     return std::unexpected(Error{Errc::timeout, "service '" + route.front()->name() + "': no answer within the call's timeout"});

@@ -170,7 +170,7 @@ class Server {
       error->message = "service '" + service_->name() + "': " + error->message;
       if (c.posted && report_) report_(*error);
       if (!next) return answer(i, ticket, &*error);
-      fail_linked(route, hops, *next, *error);
+      fail_linked(route, hops, *next, *error, c.posted != 0);
       return finish(i, ticket, false);
     }
     h.served.fetch_add(1);
@@ -228,12 +228,24 @@ class Server {
     if (!c.status.compare_exchange_strong(running, after)) service_->free_abandoned(i, ticket);
   }
 
-  // A linked call failed here: the caller waits on its last cell (of the
-  // `hops` of its `route`), so the error goes there; the next cell, held for
-  // the output, goes back.
-  void fail_linked(const Hop* route, std::uint32_t hops, Service& next, const Error& error) {
+  // A linked call failed here, while this worker holds the next cell of its
+  // `route` (`hops` long), forwarding. A call's caller waits on its last
+  // cell, so the error goes there and the next cell goes back to the caller
+  // (claimed), who frees it with the rest. A post's caller waits for nothing
+  // and frees nothing: every cell of its route is freed here.
+  void fail_linked(const Hop* route, std::uint32_t hops, Service& next, const Error& error, bool posted) {
     const auto first = route[0];
     const auto last = route[hops - 1];
+    if (posted) {
+      for (std::uint32_t k = 0; k < hops; ++k) {
+        Service* at = k == 0 ? &next : following(route[k].service);
+        if (!at || !at->has_cell(route[k].cell)) continue;
+        auto held = Status::pack(route[k].ticket, k == 0 ? CellState::forwarding : CellState::claimed);
+        if (!at->cell(route[k].cell).status.compare_exchange_strong(held, Status::pack(route[k].ticket + 1, CellState::free)))
+          at->free_abandoned(route[k].cell, route[k].ticket);
+      }
+      return;
+    }
     if (hops > 1) {
       auto held = Status::pack(first.ticket, CellState::forwarding);
       if (!next.cell(first.cell).status.compare_exchange_strong(held, Status::pack(first.ticket, CellState::claimed)))
@@ -244,14 +256,10 @@ class Server {
     auto& to = end->cell(last.cell);
     write_error(to, end->tail(last.cell), error);
     auto held = Status::pack(last.ticket, CellState::forwarding);
-    if (to.posted) {
-      if (!to.status.compare_exchange_strong(held, Status::pack(last.ticket + 1, CellState::free)))
-        end->free_abandoned(last.cell, last.ticket);
-    } else if (to.status.compare_exchange_strong(held, Status::pack(last.ticket, CellState::failed))) {
+    if (to.status.compare_exchange_strong(held, Status::pack(last.ticket, CellState::failed)))
       end->tail(last.cell).answered.ring();
-    } else {
+    else
       end->free_abandoned(last.cell, last.ticket);
-    }
   }
 
   static void write_error(CellHeader& c, CellTail& tail, const Error& error) {
@@ -277,7 +285,8 @@ class Server {
   }
 
   // After a server that died: what it was running fails (its callers are
-  // told), what waited is queued again, what was abandoned is freed.
+  // told), what waited is queued again, what was abandoned is freed; and so
+  // is the next service's cell a linked call it ran held for its output.
   void recover() {
     auto& h = service_->header();
     for (std::size_t i = 0; i < service_->geometry().cell_count(); ++i) {
@@ -286,6 +295,7 @@ class Server {
       const auto ticket = Status::ticket(s);
       switch (Status::state(s)) {
         case CellState::running: {
+          recover_route(i, CellState::running);
           auto running = s;
           if (c.posted) {  // no one waits for a post's answer, nor releases its cell: freed here
             c.status.compare_exchange_strong(running, Status::pack(ticket + 1, CellState::free));
@@ -299,12 +309,38 @@ class Server {
           h.pending[i / 64].fetch_or(1ull << (i % 64));
           break;
         case CellState::abandoned:
+          recover_route(i, CellState::abandoned);
           service_->free_abandoned(i, ticket);
           break;
         default:
           break;
       }
     }
+  }
+
+  // A linked call in cell `i` that a dead worker was running (or that its
+  // caller abandoned meanwhile): the next service's cell, which that worker
+  // may have taken for its output, does not wait for an answer that never
+  // comes. Running, the call fails as fail_linked fails it (the caller,
+  // waiting on its last cell, is told); abandoned, the cell is freed.
+  void recover_route(std::size_t i, CellState state) {
+    const std::uint32_t hops = service_->cell(i).next_hops;
+    if (hops == 0 || hops >= kMaxHops) return;
+    Hop route[kMaxHops - 1];
+    std::copy(service_->tail(i).next, service_->tail(i).next + hops, route);
+    Service* next = following(route[0].service);
+    if (!next || !next->has_cell(route[0].cell)) return;
+    if (state == CellState::abandoned) return next->free_abandoned(route[0].cell, route[0].ticket);
+    auto& status = next->cell(route[0].cell).status;
+    auto claimed = Status::pack(route[0].ticket, CellState::claimed);
+    const bool held = status.load() == Status::pack(route[0].ticket, CellState::forwarding) ||
+                      status.compare_exchange_strong(claimed, Status::pack(route[0].ticket, CellState::forwarding));
+    if (held)
+      fail_linked(route, hops, *next,
+                  {Errc::peer_dead, "service '" + service_->name() + "': its server died while running this call"},
+                  service_->cell(i).posted != 0);
+    else
+      next->free_abandoned(route[0].cell, route[0].ticket);
   }
 
   std::shared_ptr<Service> service_;
