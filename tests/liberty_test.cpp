@@ -4,6 +4,7 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "prime/liberty.hpp"
 #include "support/lifetime.hpp"
@@ -68,6 +69,21 @@ TEST(LibertyTest, AMessageThatCannotBeAssignedStillLinks) {
   liberty::Core core;
   auto one = core.chain([](Fixed m) { return Fixed{m.value + 1}; });
   EXPECT_EQ((one | one | one)(Fixed{1}).value, 4);
+}
+
+// A source takes another event while the program runs, and keeps the first.
+TEST(LibertyTest, ASourceFedFromASecondEventKeepsTheFirst) {
+  liberty::Core core;
+  Event<int> left, right;
+  auto wheels = core.source(left, "wheels");
+  wheels.feed_from(right);
+  auto reader = wheels.subscribe();
+  left.emit(1);
+  right.emit(2);
+  left.emit(3);
+  std::vector<int> got;
+  for (const auto& s : reader.read_all()) got.push_back(s.value);
+  EXPECT_EQ(got, (std::vector<int>{1, 2, 3}));
 }
 
 }  // namespace

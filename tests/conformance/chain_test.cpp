@@ -102,6 +102,12 @@ TYPED_TEST(ChainTest, RepeatThatNeverEndsIsAnErrorNotAHang) {
   EXPECT_TRUE(fails_with([&] { (void)stuck(1); }, Errc::limit_exceeded, "1000 iterations"));
 }
 
+TYPED_TEST(ChainTest, ARepeatAllowedNoIterationIsRefusedByName) {
+  auto& core = *this->core;
+  EXPECT_TRUE(fails_with([&] { (void)repeat(core, this->chain(twice), [](const int&) { return true; }, RepeatLimits{.max_iterations = 0}, "grow"); },
+                         Errc::limit_exceeded, "repeat 'grow': max_iterations must be at least 1"));
+}
+
 TYPED_TEST(ChainTest, ForkTeesEveryOutputIntoASource) {
   auto& core = *this->core;
   auto [teed, outputs] = fork(core, this->chain(twice), "doubled");

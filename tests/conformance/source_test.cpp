@@ -79,6 +79,22 @@ TYPED_TEST(SourceTest, ReaderSeesValuesInOrderWithTheirStamps) {
   EXPECT_FALSE(reader.try_read());
 }
 
+TYPED_TEST(SourceTest, ReadSomeAskedForNothingTakesNothingAndWaitsForNothing) {
+  auto lidar = this->template feed<int>("lidar");
+  auto reader = lidar.source.subscribe();
+  decltype(reader.read_all()) got;  // a Shm reader's are views
+  auto none = reader.read_some(got, 0, Clock::now() + kPatience);
+  ASSERT_TRUE(none) << none.error().describe();
+  EXPECT_EQ(*none, 0u);
+  lidar.emit(1);
+  lidar.emit(2);
+  none = reader.read_some(got, 0, Clock::now() + kPatience);
+  ASSERT_TRUE(none) << none.error().describe();
+  EXPECT_EQ(*none, 0u);
+  EXPECT_TRUE(got.empty());
+  EXPECT_EQ(reader.read_all().size(), 2u) << "both still unread";
+}
+
 TYPED_TEST(SourceTest, EachReaderHasItsOwnCursor) {
   auto lidar = this->template feed<int>("lidar");
   auto early = lidar.source.subscribe();
@@ -254,6 +270,23 @@ TYPED_TEST(SourceTest, AnErrorSourceThatNeverMakesRoomHoldsNoWorkerForever) {
   auto first = stalled.try_read();
   ASSERT_TRUE(first);
   EXPECT_NE(first->value.message.find("negative range"), std::string::npos) << first->value.message;
+}
+
+// An errors source that no one reads takes nothing from stderr: an error
+// that reaches no reader is printed there, as it is with no errors source.
+TYPED_TEST(SourceTest, AnErrorNoReaderTakesGoesToStderr) {
+  auto& core = *this->core;
+  const auto unread = core.errors();
+  auto lidar = this->template feed<int>("lidar");
+  auto reader = this->checked(lidar.source).subscribe();
+  testing::internal::CaptureStderr();
+  lidar.emit(-1);
+  lidar.emit(7);
+  auto value = reader.read_for(kPatience);  // the worker reported -1's error before it handed on 7
+  const auto printed = testing::internal::GetCapturedStderr();
+  ASSERT_TRUE(value) << value.error().describe();
+  EXPECT_NE(printed.find("negative range"), std::string::npos) << "stderr: " << printed;
+  (void)unread;
 }
 
 TYPED_TEST(SourceTest, CollectorGivesTheLatestValueOnAToken) {
@@ -582,6 +615,51 @@ TYPED_TEST(SourceTest, DestroyingTheCoreStopsAndJoinsItsWorkers) {
   EXPECT_EQ(started, 1);
   EXPECT_EQ(reader.read_all().size(), 1u);
   EXPECT_THROW((void)(source | liberty::Core{}.chain(twice)), Failure) << "linking to a dead core's source";
+}
+
+// A fork inside a worker's chain waits for room as the worker's own output
+// does: stopping the core ends that wait too.
+TYPED_TEST(SourceTest, DestroyingTheCoreReleasesAWorkerWaitingInAForkOfItsChain) {
+  Event<int> event;
+  auto source = this->core->source(event, "lidar");
+  std::atomic<int> seen{0};
+  auto [teed, outputs] = fork(*this->core, this->core->chain([&seen](int x) {
+    seen = x;
+    return twice(x);
+  }), "doubled", {.capacity = 1, .overflow = Overflow::block, .block_timeout = std::chrono::milliseconds{60'000}});
+  auto full = outputs.subscribe();
+  auto relay = source | teed;
+  auto sink = relay.subscribe();
+  event.emit(1);
+  event.emit(2);
+  ASSERT_TRUE(eventually([&] { return seen == 2; })) << "the worker took the second value (the first's copy is in the fork)";
+  ASSERT_TRUE(others_asleep_within()) << "the worker waits for room in the fork that never comes";
+  const auto t0 = Clock::now();
+  this->core.reset();
+  EXPECT_LT(Clock::now() - t0, 10s) << "stop ended the wait for room";
+  auto first = full.try_read();
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->value, 2);
+}
+
+// So does a repeat inside a worker's chain, waiting for its source.
+TYPED_TEST(SourceTest, DestroyingTheCoreReleasesAWorkerWaitingInARepeatOfItsChain) {
+  auto lidar = this->template feed<int>("lidar");
+  auto ticks = this->template feed<int>("ticks");
+  std::atomic<int> seen{0};
+  auto accumulate = repeat(*this->core, this->core->chain([&seen](std::pair<int, int> p) {
+    seen = p.second;
+    return p.first + p.second;
+  }), [](const int&) { return false; }, ticks.source, RepeatLimits{.read_timeout = std::chrono::milliseconds{60'000}});
+  auto relay = lidar.source | accumulate;
+  auto sink = relay.subscribe();
+  lidar.emit(1);
+  ticks.emit(5);
+  ASSERT_TRUE(eventually([&] { return seen == 5; })) << "the worker runs the repeat, which read one tick";
+  ASSERT_TRUE(others_asleep_within()) << "the repeat waits for a tick that never comes";
+  const auto t0 = Clock::now();
+  this->core.reset();
+  EXPECT_LT(Clock::now() - t0, 10s) << "stop ended the repeat's wait";
 }
 
 TYPED_TEST(SourceTest, DestroyingTheCoreReleasesAWorkerBlockedOnAFullBuffer) {

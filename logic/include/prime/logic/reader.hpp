@@ -80,9 +80,10 @@ class Reader {
 
   // Appends to `out` what is unread, at most `max` values, after waiting as
   // read_until does for the first: how a worker drains a busy source with one
-  // wake-up for many values.
+  // wake-up for many values. A `max` of 0 asks for nothing: 0 at once.
   std::expected<std::size_t, Error> read_some(std::vector<Sample<T>>& out, std::size_t max,
                                               Clock::time_point deadline, std::stop_token stop = {}) {
+    if (max == 0) return 0;
     return impl_->read_some(out, max, deadline, std::move(stop));
   }
 

@@ -27,7 +27,7 @@ struct Tee {
 
   Out operator()(typename Body::input_type in) const {
     Out out = body(std::move(in));
-    source.publish(out);
+    source.publish(out, Clock::now(), RuntimeState::worker_stop());  // in a worker, a stop ends a wait for room
     return out;
   }
 };

@@ -39,19 +39,21 @@ class Hub {
   [[nodiscard]] const Qos& qos() const noexcept { return qos_; }
   [[nodiscard]] const std::weak_ptr<RuntimeState>& runtime() const noexcept { return runtime_; }
 
-  void publish(Sample<T>&& sample, std::stop_token stop) {
+  // Returns how many readers it went to.
+  std::size_t publish(Sample<T>&& sample, std::stop_token stop) {
     auto readers = snapshot();
     const auto n = readers->size();
-    if (n == 0) return;
+    if (n == 0) return 0;
     if constexpr (std::copy_constructible<T>) {
       if (n > 1) {
         auto last = SharedSample<T>::share(std::move(sample), n);
         for (std::size_t i = 0; i + 1 < n; ++i) deliver(*(*readers)[i], last.claim(), stop);
         deliver(*readers->back(), std::move(last), stop);
-        return;
+        return n;
       }
     }
     deliver(*readers->back(), std::move(sample), stop);
+    return n;
   }
 
   [[nodiscard]] std::shared_ptr<Queue<T>> attach(const Qos& qos) {
@@ -73,7 +75,11 @@ class Hub {
     readers_ = std::move(next);
   }
 
-  void feed_from(Connection upstream) { upstream_ = std::move(upstream); }
+  // Keeps `upstream` connected for as long as this hub lives, beside any other.
+  void feed_from(Connection upstream) {
+    std::scoped_lock lock{mutex_};
+    upstreams_.push_back(std::move(upstream));
+  }
 
  private:
   using List = std::vector<std::shared_ptr<Queue<T>>>;
@@ -96,7 +102,7 @@ class Hub {
   const std::weak_ptr<RuntimeState> runtime_;
   std::mutex mutex_;
   std::shared_ptr<const List> readers_ = std::make_shared<const List>();
-  Connection upstream_;  // last member: disconnects before the rest goes
+  std::vector<Connection> upstreams_;  // last member: disconnects before the rest goes
 };
 
 template <class T>
@@ -166,10 +172,21 @@ class LocalSource {
     hub_->publish(Sample<T>{std::move(value), stamp}, std::move(stop));
   }
 
-  // Feeds this source from an event until the source is gone.
+  // Feeds this source from an event (as well as from what feeds it already)
+  // until the source is gone.
   void feed_from(Event<T>& event) const {
     hub_->feed_from(event.connect([weak = std::weak_ptr<detail::Hub<T>>{hub_}](Sample<T>&& s) {
       if (auto hub = weak.lock()) hub->publish(std::move(s), {});
+    }));
+  }
+
+  // Feeds this source from the errors its core's workers report, telling
+  // the core how many readers each one reached (with none, it goes to stderr).
+  void feed_from_reports(detail::RuntimeState& runtime) const
+    requires std::same_as<T, Error>
+  {
+    hub_->feed_from(runtime.errors().connect([weak = std::weak_ptr<detail::Hub<T>>{hub_}](Sample<T>&& s) {
+      if (auto hub = weak.lock()) detail::RuntimeState::delivered(hub->publish(std::move(s), {}));
     }));
   }
 

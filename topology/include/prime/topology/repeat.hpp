@@ -12,6 +12,7 @@
 #include "prime/logic/error.hpp"
 #include "prime/logic/reader.hpp"
 #include "prime/topology/concepts.hpp"
+#include "prime/topology/detail/runtime_state.hpp"
 #include "prime/topology/graph.hpp"
 
 namespace prime {
@@ -28,6 +29,12 @@ namespace detail {
 inline Failure too_many_iterations(const std::string& name, std::size_t max) {
   return Failure{{Errc::limit_exceeded,
                   "repeat '" + name + "': condition not met after " + std::to_string(max) + " iterations"}};
+}
+
+// A loop allowed no iteration could not run its body even once.
+inline void check(const RepeatLimits& limits, const std::string& name) {
+  if (limits.max_iterations == 0)
+    throw Failure{{Errc::limit_exceeded, "repeat '" + name + "': max_iterations must be at least 1 (the body runs at least once)"}};
 }
 
 template <class Body, class Until>
@@ -64,7 +71,7 @@ struct RepeatReading {
   T operator()(T value) const {
     std::scoped_lock lock{input->mutex};
     for (std::size_t i = 0; i < limits.max_iterations; ++i) {
-      auto next = input->reader.read_for(limits.read_timeout);
+      auto next = input->reader.read_for(limits.read_timeout, RuntimeState::worker_stop());  // in a worker, a stop ends the wait
       if (!next) throw Failure{{next.error().code, "repeat '" + name + "': " + next.error().message}};
       value = body(typename Body::input_type{std::move(value), std::move(next->value)});
       if (std::invoke(until, std::as_const(value))) return value;
@@ -84,6 +91,7 @@ template <Medium M, Chain Body, class Until>
   static_assert(std::same_as<T, typename Body::output_type>,
                 "prime::repeat: the body must give back what it takes (Chain<T, T>)");
   static_assert(std::predicate<const Until&, const T&>, "prime::repeat: `until` must be callable as bool(const T&)");
+  detail::check(limits, name);
   Graph loop = Graph::node(name, "repeat", std::string{core.medium()});
   Graph graph = Graph::sequence(loop, body.graph()).looping_back_to(loop);
   return core.template chain<T>(detail::Repeat<Body, Until>{std::move(body), std::move(until), limits, std::move(name)},
@@ -102,6 +110,7 @@ template <Medium M, Chain Body, class Until, Source S>
                 "prime::repeat: with a source, the body must be a Chain<std::pair<T, U>, T>, with U the "
                 "source's value_type (or a pair U converts into)");
   static_assert(std::predicate<const Until&, const T&>, "prime::repeat: `until` must be callable as bool(const T&)");
+  detail::check(limits, name);
   Graph loop = Graph::node(name, "repeat", std::string{core.medium()});
   Graph graph = Graph::sequence(Graph::parallel({&source.graph(), &loop}), body.graph()).looping_back_to(loop);
   using Loop = detail::RepeatReading<Body, Until, U>;

@@ -40,10 +40,11 @@ class Runtime {
   }
 
   // Every error a worker of this core reports: a user block that threw, a
-  // reader that made no room in time. With no subscriber, errors go to stderr.
+  // reader that made no room in time. An error no reader of an errors source
+  // takes (none made, or none subscribed) goes to stderr.
   [[nodiscard]] LocalSource<Error> errors(Qos qos = {.capacity = 256}) {
     LocalSource<Error> source{"errors", qos, state_, Graph::node("errors", "source", state_->medium())};
-    source.feed_from(state_->errors());
+    source.feed_from_reports(*state_);
     return source;
   }
 

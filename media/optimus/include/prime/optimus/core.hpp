@@ -175,6 +175,7 @@ class Core : public Runtime, public ChainFactory<Core> {
     if (stopping_) throw Failure{{Errc::stopped, "service '" + shown + "': the optimus core is shutting down"}};
     for (std::size_t i = 0; i < std::max<std::size_t>(serve_options.workers, 1); ++i) {
       services_.emplace_back([pool = pool_, shown, key, shared, weak = runtime()](std::stop_token stop) {
+        prime::detail::RuntimeState::become_worker(stop);
         detail::serve_requests<I>(pool, shown, key, *shared, weak, std::move(stop));
       });
     }
