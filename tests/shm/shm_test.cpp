@@ -1036,6 +1036,13 @@ TEST(ShmDomain, NamesAreEscapedSoDomainsAndTopicsNeverCollide) {
   EXPECT_NO_THROW((void)two.publisher<double>("topic.x")) << "another domain's topic, not the same segment";
 }
 
+TEST(ShmDomain, AnEscapedNameReadsBackAndAnOddOneStaysAsItIs) {
+  using shm::detail::unescape;
+  EXPECT_EQ(unescape("lidar%2Fscan%2Ev2"), "lidar/scan.v2");
+  EXPECT_EQ(unescape("odd%zz%4"), "odd%zz%4") << "no name segment_name made: taken as it is, not an exception";
+  EXPECT_EQ(unescape("%+1x"), "%+1x");
+}
+
 TEST(ShmDomain, AParticipantStaysWhileAnythingItMadeLives) {
   const auto domain = unique_domain("outlive");
   shm::Core watcher{domain};

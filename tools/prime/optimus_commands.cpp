@@ -172,15 +172,10 @@ int optimus_watch(const Options& o, const std::string& command) {
                 << "s" << std::endl;
   };
   finish_on_ctrl_c();
-  const auto first_by = command == "echo" && o.timeout > 0 ? start + std::chrono::duration_cast<Clock::duration>(
-                                                                         std::chrono::duration<double>(o.timeout))
-                                                           : Clock::time_point::max();
+  const auto first_by = command == "echo" ? first_sample_by(o, start) : Clock::time_point::max();
   while (!ctrl_c_pressed() && (o.count == 0 || seen < o.count) &&
          (o.duration == 0 || Clock::now() - start < std::chrono::duration<double>(o.duration))) {
-    if (seen == 0 && Clock::now() >= first_by) {
-      std::cerr << "prime: nothing published on '" << o.name << "' within " << o.timeout << " s\n";
-      return kNothing;
-    }
+    if (seen == 0 && Clock::now() >= first_by) return nothing_published(o);
     auto reply = r.command({"XREAD", "COUNT", "100", "BLOCK", "200", "STREAMS", stream, last});
     if (reply->type == REDIS_REPLY_ARRAY && reply->elements > 0) {
       const auto* entries = reply->element[0]->element[1];

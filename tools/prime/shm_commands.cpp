@@ -32,6 +32,15 @@ void finish_on_ctrl_c() {
 }
 bool ctrl_c_pressed() { return stop_requested; }
 
+Clock::time_point first_sample_by(const Options& o, Clock::time_point start) {
+  if (o.timeout <= 0) return Clock::time_point::max();
+  return start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.timeout));
+}
+int nothing_published(const Options& o) {
+  std::cerr << "prime: nothing published on '" << o.name << "' within " << o.timeout << " s\n";
+  return kNothing;
+}
+
 namespace {
 
 using namespace std::chrono_literals;
@@ -128,7 +137,7 @@ int watch_loop(const Options& o, Watch& w, OnSample on_sample, Report report) {
   auto next_report = start + 1s;
   std::size_t seen = 0, reported = 0;
   auto last_sample = start;
-  while (!stop_requested && Clock::now() < end && (o.count == 0 || seen < o.count)) {
+  while (!ctrl_c_pressed() && Clock::now() < end && (o.count == 0 || seen < o.count)) {
     auto sample = w.reader.read_for(std::min<Clock::duration>(100ms, end - Clock::now()));
     const auto now = Clock::now();
     if (sample) {
@@ -161,19 +170,32 @@ int shm_domains(const Options& o) {
     std::string out = "[";
     for (std::size_t i = 0; i < found.size(); ++i) {
       const auto& d = found[i];
-      out += std::string{i ? "," : ""} + "{\"name\":" + quote(d.name) + ",\"participants_alive\":" +
-             std::to_string(d.participants_alive) + ",\"participants_dead\":" + std::to_string(d.participants_dead) +
-             ",\"topics\":" + std::to_string(d.topics) + ",\"services\":" + std::to_string(d.services) + "}";
+      out += std::string{i ? "," : ""} + "{\"name\":" + quote(d.name);
+      if (!d.unreadable.empty()) {
+        out += ",\"unreadable\":" + quote(d.unreadable) + "}";
+        continue;
+      }
+      out += ",\"participants_alive\":" + std::to_string(d.participants_alive) + ",\"participants_dead\":" +
+             std::to_string(d.participants_dead) + ",\"topics\":" + std::to_string(d.topics) +
+             ",\"services\":" + std::to_string(d.services) + "}";
     }
     std::cout << out << "]\n";
     return kOk;
   }
   Table table{{"DOMAIN", "ALIVE", "DEAD", "TOPICS", "SERVICES"}};
-  for (const auto& d : found)
+  std::vector<std::string> unreadable;
+  for (const auto& d : found) {
+    if (!d.unreadable.empty()) {
+      table.add({d.name, "?", "?", "?", "?"});
+      unreadable.push_back(d.name + ": " + d.unreadable);
+      continue;
+    }
     table.add({d.name, std::to_string(d.participants_alive), std::to_string(d.participants_dead), std::to_string(d.topics),
                std::to_string(d.services)});
+  }
   if (table.empty()) std::cout << "no shared-memory domains on this machine\n";
   else table.print(std::cout);
+  for (const auto& why : unreadable) std::cout << "could not read " << why << '\n';
   return kOk;
 }
 
@@ -345,15 +367,11 @@ int shm_echo(const Options& o) {
   const auto reach = described ? extent(*layout) : 0;
   finish_on_ctrl_c();
   std::size_t seen = 0;
-  const auto first_by = o.timeout > 0 ? Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.timeout))
-                                      : Clock::time_point::max();
-  while (!stop_requested && (o.count == 0 || seen < o.count)) {
+  const auto first_by = first_sample_by(o, Clock::now());
+  while (!ctrl_c_pressed() && (o.count == 0 || seen < o.count)) {
     auto sample = w.reader.read_for(100ms);
     if (!sample) {
-      if (seen == 0 && Clock::now() >= first_by) {
-        std::cerr << "prime: nothing published on '" << o.name << "' within " << o.timeout << " s\n";
-        return kNothing;
-      }
+      if (seen == 0 && Clock::now() >= first_by) return nothing_published(o);
       continue;
     }
     ++seen;
@@ -405,10 +423,10 @@ int shm_pub(const Options& o) {
   finish_on_ctrl_c();
   const auto period = o.rate > 0 ? std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1 / o.rate)) : Clock::duration::zero();
   std::size_t sent = 0;
-  for (auto next = Clock::now(); !stop_requested; next += period) {
-    while (!stop_requested && Clock::now() < next)  // in steps, so Ctrl-C ends a long period at once
+  for (auto next = Clock::now(); !ctrl_c_pressed(); next += period) {
+    while (!ctrl_c_pressed() && Clock::now() < next)  // in steps, so Ctrl-C ends a long period at once
       std::this_thread::sleep_until(std::min(next, Clock::now() + 100ms));
-    if (stop_requested) break;
+    if (ctrl_c_pressed()) break;
     if (auto done = publisher.publish(bytes); !done) throw Failure{done.error()};
     ++sent;
     if (o.rate == 0 || (o.count > 0 && sent >= o.count)) break;
@@ -481,7 +499,9 @@ int shm_graph(const Options& o) {
 int shm_clean(const Options& o) {
   std::vector<std::string> domains;
   if (o.all) {
-    for (const auto& d : shm::domains()) domains.push_back(d.name);
+    for (const auto& d : shm::domains())
+      if (d.unreadable.empty()) domains.push_back(d.name);
+      else std::cerr << "prime: left domain '" << d.name << "' alone: " << d.unreadable << '\n';
   } else {
     snapshot_of(o.domain);
     domains.push_back(o.domain);

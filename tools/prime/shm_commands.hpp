@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "prime/logic/sample.hpp"
+
 namespace prime::tool {
 
 // What every command is given.
@@ -27,6 +29,11 @@ struct Options {
 // the process, so it finishes its report.
 void finish_on_ctrl_c();
 bool ctrl_c_pressed();
+
+// When echo gives up waiting for a first sample: --timeout after `start`
+// (never, for 0); and giving up, saying so, with the exit code for it.
+Clock::time_point first_sample_by(const Options& o, Clock::time_point start);
+int nothing_published(const Options& o);
 
 // What a command's exit code says.
 enum Exit : int { kOk = 0, kFailed = 1, kUsage = 2, kNotFound = 3, kNothing = 4, kUnreachable = 5 };

@@ -23,6 +23,7 @@ struct DomainSummary {
   std::size_t participants_dead = 0;  // listed, but their lease is gone
   std::size_t topics = 0;
   std::size_t services = 0;
+  std::string unreadable;  // why it could not be looked at (another user's, say); the counts are then 0
 };
 
 // What domain `domain` holds now, or nothing when it does not exist.
@@ -32,7 +33,8 @@ struct DomainSummary {
   return detail::snapshot(registry);
 }
 
-// The domains whose registry lies in /dev/shm, alive or dead.
+// The domains whose registry lies in /dev/shm, alive or dead; one this
+// process may not read is listed with the reason.
 [[nodiscard]] inline std::vector<DomainSummary> domains() {
   std::vector<DomainSummary> found;
   std::error_code ignored;
@@ -41,7 +43,13 @@ struct DomainSummary {
     const std::string suffix = ".registry.";
     if (!file.starts_with("prime.") || !file.ends_with(suffix)) continue;
     const auto domain = detail::unescape(file.substr(6, file.size() - 6 - suffix.size()));
-    auto snapshot = inspect(domain);
+    std::optional<RegistrySnapshot> snapshot;
+    try {
+      snapshot = inspect(domain);
+    } catch (const Failure& f) {
+      found.push_back({.name = domain, .unreadable = f.error().message});
+      continue;
+    }
     if (!snapshot) continue;
     DomainSummary d{domain};
     for (const auto& p : snapshot->participants) (p.alive ? d.participants_alive : d.participants_dead) += 1;

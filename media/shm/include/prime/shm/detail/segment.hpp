@@ -8,6 +8,7 @@
 
 #include <cctype>
 #include <cerrno>
+#include <charconv>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
@@ -137,12 +138,18 @@ class Segment {
   bip::mapped_region region_;
 };
 
-// The text segment_name() escaped.
+// The text segment_name() escaped. A '%' not followed by two hex digits
+// (a name segment_name() never made) stays as it is.
 inline std::string unescape(std::string_view text) {
   std::string out;
+  auto hex = [&](std::size_t at, unsigned& value) {  // the two hex digits at `at`
+    const auto [end, error] = std::from_chars(text.data() + at, text.data() + at + 2, value, 16);
+    return error == std::errc{} && end == text.data() + at + 2;
+  };
   for (std::size_t i = 0; i < text.size(); ++i) {
-    if (text[i] == '%' && i + 2 < text.size()) {
-      out.push_back(static_cast<char>(std::stoi(std::string{text.substr(i + 1, 2)}, nullptr, 16)));
+    unsigned value = 0;
+    if (text[i] == '%' && i + 2 < text.size() && hex(i + 1, value)) {
+      out.push_back(static_cast<char>(value));
       i += 2;
     } else {
       out.push_back(text[i]);
