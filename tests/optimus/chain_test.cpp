@@ -189,6 +189,23 @@ TEST_F(OptimusChain, CallingAServiceNobodyServesIsPeerDeadNamingIt) {
   EXPECT_EQ(raw.integer({"LLEN", domain + ":svc:nobody"}), 0) << "the unanswered request was withdrawn";
 }
 
+// A linked call goes on from service to service without its caller: one
+// whose next service has no live worker says so to the caller at once,
+// rather than leaving the request where no one takes it until the call times out.
+TEST_F(OptimusChain, ALinkedCallWhoseNextServiceHasNoLiveWorkerIsPeerDeadAtOnce) {
+  optimus::Core core{options()};
+  auto linked = core.serve("add_one", [](int x) { return x + 1; }) | core.service<int, int>("nobody");
+  const auto start = Clock::now();
+  auto answer = linked.call(1, Clock::now() + 30s);
+  ASSERT_FALSE(answer);
+  EXPECT_EQ(answer.error().code, Errc::peer_dead) << answer.error().describe();
+  EXPECT_NE(answer.error().message.find("service 'nobody': no live worker serves it (next after 'add_one'"), std::string::npos)
+      << answer.error().message;
+  EXPECT_LT(Clock::now() - start, 10s) << "told at once, not at the 30 s timeout";
+  RawRedis raw{shared_redis().url()};
+  EXPECT_EQ(raw.integer({"LLEN", domain + ":svc:nobody"}), 0) << "nothing left for a worker that never comes";
+}
+
 TEST_F(OptimusChain, AServiceNameTakenWithOtherTypesIsATypeMismatch) {
   optimus::Core core{options()};
   (void)core.serve("planner", [](int x) { return x; });

@@ -7,6 +7,7 @@
 #include <optional>
 #include <stop_token>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -38,6 +39,19 @@ std::expected<std::string, Error> run_block(const F& block, std::string_view pay
     return std::unexpected(Error{Errc::block_failed, where + ": an exception of unknown type"});
   }
 }
+
+// Hands a linked call's request on to the next service (KEYS[1], its
+// request key) if a worker of it lives (KEYS[2], its alive key); else
+// answers the caller at once (KEYS[3], its reply key) with ARGV[2], which
+// expires after ARGV[3] ms. One round trip, pipelined as an RPUSH would be.
+inline constexpr std::string_view kForwardScript = R"lua(
+if redis.call('EXISTS', KEYS[2]) == 1 then
+  return redis.call('RPUSH', KEYS[1], ARGV[1])
+end
+redis.call('RPUSH', KEYS[3], ARGV[2])
+redis.call('PEXPIRE', KEYS[3], ARGV[3])
+return 0
+)lua";
 
 // One worker of a service: waits on the request key, runs the block, and
 // sends the result on (the next service of the request's route) or back (the
@@ -124,12 +138,23 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
           system_ms(std::chrono::system_clock::now()) > request->deadline_ms)
         continue;  // its caller has given up: running it would answer nobody
       auto result = run_block<In>(block, request->payload, where);
+      // An answer nobody takes (its caller gave up) goes away by itself.
+      const auto left = request->deadline_ms - system_ms(std::chrono::system_clock::now());
+      const auto ttl = std::to_string(std::max<std::int64_t>(left, 0) + 10'000);
       if (result && !request->route.empty()) {
+        const auto& next = request->route.front();
         std::string forwarded;
         forwarded.reserve(result->size() + request->reply_key.size() + 64);
         const std::span<const std::string> rest{request->route.data() + 1, request->route.size() - 1};
         encode_request(request->id, request->reply_key, rest, request->deadline_ms, *result, forwarded);
-        outbox.push_back({"RPUSH", request->route.front(), std::move(forwarded)});
+        const auto prefix = service_key(*pool, "");
+        const auto next_name = next.starts_with(prefix) ? next.substr(prefix.size()) : next;
+        std::string refused;
+        encode_response(request->id, Errc::peer_dead,
+                        "service '" + next_name + "': no live worker serves it (next after '" + name + "' in a linked call)",
+                        {}, refused);
+        outbox.push_back({"EVAL", std::string{kForwardScript}, "3", next, alive_key(next), request->reply_key,
+                          std::move(forwarded), std::move(refused), ttl});
         continue;
       }
       std::string response;
@@ -137,9 +162,6 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
         encode_response(request->id, std::nullopt, {}, *result, response);
       else
         encode_response(request->id, result.error().code, result.error().message, {}, response);
-      // An answer nobody takes (its caller gave up) goes away by itself.
-      const auto left = request->deadline_ms - system_ms(std::chrono::system_clock::now());
-      const auto ttl = std::to_string(std::max<std::int64_t>(left, 0) + 10'000);
       outbox.push_back({"RPUSH", request->reply_key, std::move(response)});
       outbox.push_back({"PEXPIRE", request->reply_key, ttl});
     }
