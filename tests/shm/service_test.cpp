@@ -7,9 +7,11 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <expected>
 #include <fstream>
 #include <latch>
 #include <new>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -418,6 +420,26 @@ TEST_F(ServiceTest, PostSendsWithoutWaitingForTheAnswer) {
   EXPECT_TRUE(MappedTopic::within(10s, [&] { return sum == 5050; }));
 }
 
+// A post is sent when post() returns: the handle that sent it may go at
+// once, the post is still run (and so is the rest of its linked route).
+TEST_F(ServiceTest, APostOutlivesTheHandleThatSentIt) {
+  std::latch may_go{1};
+  std::atomic<int> got{0};
+  core.serve("busy", [&](const int& x) {
+    if (x < 0) may_go.wait();  // one worker: a post sent meanwhile waits in the queue
+    return x;
+  });
+  core.serve("sink", [&](const int& x) {
+    got = x;
+    return 0;
+  });
+  std::jthread blocker{[busy = core.chain<int, int>("busy")] { EXPECT_EQ(busy(-1), -1); }};
+  ASSERT_TRUE(MappedTopic::within(10s, [&] { return listed(core, "busy")->requests_from_callers == 1; }));
+  ASSERT_TRUE((core.chain<int, int>("busy") | core.chain<int, int>("sink")).post(7));  // its handle goes at once
+  may_go.count_down();
+  EXPECT_TRUE(MappedTopic::within(10s, [&] { return got == 7; })) << "the post reached the end of its route";
+}
+
 TEST_F(ServiceTest, LinkedServicesForwardSoTheCallerSendsOnceAndWaitsOnce) {
   core.serve("double", [](const int& x) { return 2 * x; });
   core.serve("describe", [](const int& x) { return bounded_string<16>{std::to_string(x)}; });
@@ -509,6 +531,56 @@ TEST_F(ServiceTest, APostThatFailsDownALinkedRouteFreesEveryCellOfIt) {
     EXPECT_TRUE(MappedTopic::within(10s, [&] { return (out = one->call(1)).has_value(); })) << out.error().describe();
   }
   EXPECT_EQ(linked(1), 4);
+}
+
+// A linked call holds a cell of each later service's segment. When one
+// comes back with other limits (a new segment under the same name) before
+// the call reaches it, the cell it held went with the old segment: its
+// output must never land in the cell with the same place and ticket in the
+// new one, which another call holds.
+TEST_F(ServiceTest, AnOutputForAServiceMadeAnewNeverLandsInAnotherCallsCell) {
+  std::latch first_may_go{1}, other_may_go{1};
+  auto blocking = [](std::latch& gate) {
+    return [&gate](const int& x) {
+      if (x < 0) gate.wait();  // one worker each: what comes next waits in the queue
+      return x;
+    };
+  };
+  core.serve("first", blocking(first_may_go));
+  core.serve("other_first", blocking(other_may_go));
+  auto all_free = [&](const std::string& name) {
+    MappedService mapped{core.domain(), name};
+    for (std::size_t i = 0; i < mapped.header().cell_count; ++i)
+      if (shm::detail::Status::state(mapped.cell(i).status.load()) != shm::detail::CellState::free) return false;
+    return true;
+  };
+  auto blocker = [&](const std::string& name) {
+    return std::jthread{[&, chain = core.chain<int, int>(name)] { EXPECT_EQ(chain(-1), -1); }};
+  };
+  auto first_blocked = blocker("first");
+  ASSERT_TRUE(MappedTopic::within(10s, [&] { return listed(core, "first")->requests_from_callers == 1; }));
+  auto posting = core.chain<int, int>("first") | core.chain<int, int>("add");
+  {
+    shm::Core old_server{core.domain()};
+    old_server.serve("add", [](const int& x) { return x + 100; });
+    ASSERT_TRUE(posting.post(1)) << "queued behind the blocker";
+  }  // its server stops; the next one asks for other limits
+  shm::Core new_server{core.domain()};
+  new_server.serve("add", [](const int& x) { return x + 200; }, {.max_clients = 8});
+  auto other_blocked = blocker("other_first");
+  ASSERT_TRUE(MappedTopic::within(10s, [&] { return listed(core, "other_first")->requests_from_callers == 1; }));
+  std::optional<std::expected<int, Error>> answer;
+  std::jthread call{[&, linked = core.chain<int, int>("other_first") | core.chain<int, int>("add")] {
+    answer = linked.call(5);  // its cell in the new segment is claimed, waiting for other_first's output
+  }};
+  ASSERT_TRUE(MappedTopic::within(10s, [&] { return listed(core, "other_first")->requests_from_callers == 2; }));
+  first_may_go.count_down();  // the post goes on, towards a segment that is gone
+  first_blocked.join();
+  ASSERT_TRUE(MappedTopic::within(10s, [&] { return all_free("first"); })) << "the post is done with";
+  other_may_go.count_down();
+  call.join();
+  ASSERT_TRUE(answer && *answer) << (answer ? answer->error().describe() : "no answer");
+  EXPECT_EQ(**answer, 205) << "its own request's answer, never the post's";
 }
 
 // A server takes a service, then sets its limits: a caller that binds in

@@ -139,11 +139,18 @@ class Binding {
                                                            std::to_string(service.geometry().max_clients) + " clients (max_clients)"});
   }
 
+  // Gives the slot up, and its cells but those of posts under way: a post
+  // is sent once post() returns, and its workers free its cells.
   void release_slot() {
     if (!service_) return;
     auto& h = service_->header();
     const auto calls = service_->geometry().calls_per_client;
-    for (std::size_t k = 0; k < calls; ++k) service_->release(slot_ * calls + k);
+    for (std::size_t k = 0; k < calls; ++k) {
+      const auto i = slot_ * calls + k;
+      const auto state = Status::state(service_->cell(i).status.load());
+      const bool post_under_way = service_->cell(i).posted != 0 && state != CellState::free && state != CellState::abandoned;
+      if (!post_under_way) service_->release(i);
+    }
     h.clients[slot_].owner.store(0);
     service_.reset();
   }
@@ -236,7 +243,8 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   c.posted = posted ? 1 : 0;
   c.next_hops = static_cast<std::uint32_t>(held.size() - 1);
   for (std::size_t k = 1; k < held.size(); ++k)
-    first.service->tail(first.cell).next[k - 1] = {held[k].service->index(), static_cast<std::uint32_t>(held[k].cell), held[k].ticket};
+    first.service->tail(first.cell).next[k - 1] = {held[k].service->index(), static_cast<std::uint32_t>(held[k].cell),
+                                                   held[k].ticket, held[k].service->header().incarnation};
   // Every cell of the route says whether it is posted (its worker then
   // frees it), as the first does: a cell a post left marked, taken by a
   // call, would be freed unanswered where the call fails before reaching it.

@@ -147,7 +147,7 @@ class Server {
     std::byte* out = service_->reply(i);
     std::size_t capacity = service_->geometry().max_reply_size;
     if (hops > 0) {
-      next = following(route[0].service);
+      next = following(route[0]);
       if (!next || !take_over(*next, route[0])) return finish(i, ticket, false);  // its caller gave up
       out = next->request(route[0].cell);
       capacity = next->geometry().max_request_size;
@@ -184,7 +184,6 @@ class Server {
     auto& to = next->cell(hop.cell);
     to.request_size = size;
     to.stamp = c.stamp;
-    to.posted = c.posted;
     to.next_hops = hops - 1;
     std::copy(route + 1, route + hops, next->tail(hop.cell).next);
     auto held = Status::pack(hop.ticket, CellState::forwarding);
@@ -238,7 +237,7 @@ class Server {
     const auto last = route[hops - 1];
     if (posted) {
       for (std::uint32_t k = 0; k < hops; ++k) {
-        Service* at = k == 0 ? &next : following(route[k].service);
+        Service* at = k == 0 ? &next : following(route[k]);
         if (!at || !at->has_cell(route[k].cell)) continue;
         auto held = Status::pack(route[k].ticket, k == 0 ? CellState::forwarding : CellState::claimed);
         if (!at->cell(route[k].cell).status.compare_exchange_strong(held, Status::pack(route[k].ticket + 1, CellState::free)))
@@ -251,7 +250,7 @@ class Server {
       if (!next.cell(first.cell).status.compare_exchange_strong(held, Status::pack(first.ticket, CellState::claimed)))
         next.free_abandoned(first.cell, first.ticket);
     }
-    Service* end = hops > 1 ? following(last.service) : &next;
+    Service* end = hops > 1 ? following(last) : &next;
     if (!end || (hops > 1 && !take_over(*end, last))) return;
     auto& to = end->cell(last.cell);
     write_error(to, end->tail(last.cell), error);
@@ -269,18 +268,21 @@ class Server {
     tail.error[n] = '\0';
   }
 
-  // The service entry `index` of the registry names, mapped here.
-  Service* following(std::uint32_t index) {
+  // The service `hop` goes to, mapped here: the segment its registry entry
+  // names now, if that is still the one the hop's caller held a cell in.
+  Service* following(const Hop& hop) {
     std::scoped_lock lock{mutex_};
-    auto& known = next_[index];
-    if (known && known->current()) return known.get();
-    const auto name = service_->registry().name_at(index, EndpointKind::service);
-    if (!name) return nullptr;
-    try {
-      known = Service::open_existing(service_->registry_handle(), *name);
-    } catch (const Failure&) {
-      return nullptr;  // damaged: as if it were gone
+    auto& known = next_[hop.service];
+    if (!known || !known->current()) {
+      const auto name = service_->registry().name_at(hop.service, EndpointKind::service);
+      if (!name) return nullptr;
+      try {
+        known = Service::open_existing(service_->registry_handle(), *name);
+      } catch (const Failure&) {
+        return nullptr;  // damaged: as if it were gone
+      }
     }
+    if (!known || known->header().incarnation != hop.incarnation) return nullptr;  // made anew since: that cell is gone
     return known.get();
   }
 
@@ -328,7 +330,7 @@ class Server {
     if (hops == 0 || hops >= kMaxHops) return;
     Hop route[kMaxHops - 1];
     std::copy(service_->tail(i).next, service_->tail(i).next + hops, route);
-    Service* next = following(route[0].service);
+    Service* next = following(route[0]);
     if (!next || !next->has_cell(route[0].cell)) return;
     if (state == CellState::abandoned) return next->free_abandoned(route[0].cell, route[0].ticket);
     auto& status = next->cell(route[0].cell).status;

@@ -11,6 +11,7 @@
 #include <memory>
 #include <new>
 #include <optional>
+#include <random>
 #include <string>
 
 #include "prime/common/fingerprint.hpp"
@@ -215,6 +216,9 @@ class Service {
 
   static void set_up(std::byte* data, const ServiceSpec& spec, const ServiceGeometry& geometry) {
     auto* h = ::new (data) ServiceHeader{};
+    std::random_device random;
+    h->incarnation = (std::uint64_t{random()} << 32 | random()) ^
+                     static_cast<std::uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count());
     const auto& q = spec.qos;
     h->request_type = spec.request_type;
     h->reply_type = spec.reply_type;

@@ -24,7 +24,7 @@ namespace prime::shm::detail {
 // is freed, so an answer meant for a call that gave up never reaches a later one.
 
 inline constexpr std::uint64_t kServiceMagic = 0x5052494d45535633ull;  // "PRIMESV3"
-inline constexpr std::uint32_t kServiceLayout = 4;
+inline constexpr std::uint32_t kServiceLayout = 5;
 inline constexpr std::size_t kMaxCells = 256;
 inline constexpr std::size_t kPendingWords = kMaxCells / 64;
 inline constexpr std::size_t kMaxServiceClients = 128;
@@ -51,11 +51,13 @@ struct Status {
 };
 
 // The next service a linked call goes on to: the registry entry that names
-// it, and the cell (and ticket) its caller holds there.
+// it, which of the segments made under that name (its incarnation), and the
+// cell (and ticket) its caller holds there.
 struct Hop {
   std::uint32_t service = 0;
   std::uint32_t cell = 0;
   std::uint64_t ticket = 0;
+  std::uint64_t incarnation = 0;
 };
 
 // A cell is its header line, the reply, the request and its tail, in that
@@ -88,6 +90,10 @@ struct ServiceHeader {
   std::atomic<std::uint64_t> magic{0};
   std::uint32_t layout = kServiceLayout;
   std::atomic<std::uint32_t> workers{0};  // the current server's
+  // Drawn at random when the segment is made: a segment made anew under the
+  // same name (a server with other limits) is another incarnation, so a
+  // linked call that held a cell of the old one never takes the new one's.
+  std::uint64_t incarnation = 0;
   Fingerprint request_type{};
   Fingerprint reply_type{};
   char request_schema[kSchemaCapacity]{};  // the types' descriptions, for tools
