@@ -206,6 +206,30 @@ TEST_F(OptimusChain, ALinkedCallWhoseNextServiceHasNoLiveWorkerIsPeerDeadAtOnce)
   EXPECT_EQ(raw.integer({"LLEN", domain + ":svc:nobody"}), 0) << "nothing left for a worker that never comes";
 }
 
+// A service lives as long as the process hosting it, however long its
+// blocks run: one busy for longer than its alive key lasts (3 s) is slow,
+// not dead, and a linked call still hands on to it and is answered.
+TEST_F(OptimusChain, AServiceBusyForLongerThanItsAliveKeyLastsIsSlowNotDead) {
+  optimus::Core core{options()};
+  std::atomic<bool> entered{false};
+  auto slow = core.serve("slow", [&](int x) {
+    if (x < 0) {  // a long computation
+      entered = true;
+      std::this_thread::sleep_for(optimus::detail::kAliveFor + 1s);
+    }
+    return x;
+  });
+  std::jthread busy{[&] { EXPECT_EQ(slow.call(-1, Clock::now() + 30s).value_or(0), -1); }};
+  ASSERT_TRUE(eventually([&] { return entered.load(); }));
+  std::this_thread::sleep_for(optimus::detail::kAliveFor + 500ms);  // the time it takes a key to run out, not a wait for an event
+  RawRedis raw{shared_redis().url()};
+  EXPECT_EQ(raw.integer({"EXISTS", domain + ":svc:slow:alive"}), 1) << "still alive while its one worker is busy";
+  auto linked = core.serve("first", [](int x) { return x; }) | slow;
+  auto answer = linked.call(7, Clock::now() + 30s);
+  ASSERT_TRUE(answer) << answer.error().describe();
+  EXPECT_EQ(*answer, 7);
+}
+
 TEST_F(OptimusChain, AServiceNameTakenWithOtherTypesIsATypeMismatch) {
   optimus::Core core{options()};
   (void)core.serve("planner", [](int x) { return x; });

@@ -167,12 +167,25 @@ class Core : public Runtime, public ChainFactory<Core> {
   // Service workers are the core's own threads, not the runtime's: stopping
   // stops them first, so they answer what they are running while the
   // workers that called them still wait (see stop()).
+  // A service is alive from the moment it is hosted (a linked call hands
+  // on only to a live one): its key is set here, then kept by one thread of
+  // the core for all its services.
   template <class I, class F>
   void host(const std::string& name, std::string shown, F block, const ServeOptions& serve_options) {
     auto shared = std::make_shared<const F>(std::move(block));
     const auto key = detail::service_key(*pool_, name);
+    if (auto marked = detail::mark_alive(*pool_, {detail::alive_key(key)}); !marked)
+      throw Failure{{marked.error().code, "service '" + shown + "': " + marked.error().message}};
     std::scoped_lock lock{services_mutex_};
     if (stopping_) throw Failure{{Errc::stopped, "service '" + shown + "': the optimus core is shutting down"}};
+    alive_keys_.push_back(detail::alive_key(key));
+    if (alive_keys_.size() == 1)
+      services_.emplace_back([this](std::stop_token stop) {
+        detail::keep_alive(pool_, [this] {
+          std::scoped_lock lock{services_mutex_};
+          return alive_keys_;
+        }, stop);
+      });
     for (std::size_t i = 0; i < std::max<std::size_t>(serve_options.workers, 1); ++i) {
       services_.emplace_back([pool = pool_, shown, key, shared, weak = runtime()](std::stop_token stop) {
         prime::detail::RuntimeState::become_worker(stop);
@@ -189,6 +202,7 @@ class Core : public Runtime, public ChainFactory<Core> {
   std::mutex services_mutex_;
   bool stopping_ = false;
   std::vector<std::jthread> services_;
+  std::vector<std::string> alive_keys_;  // of every service hosted here
 };
 
 static_assert(Medium<Core>);

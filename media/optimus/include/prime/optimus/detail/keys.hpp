@@ -12,7 +12,7 @@ namespace prime::optimus::detail {
 
 // The keys of one domain ("<domain>:..."); nothing else is ever touched.
 inline std::string service_key(const Pool& pool, std::string_view name) { return pool.key("svc:", name); }
-// Refreshed by a service's workers while they live (beside its request key).
+// Kept by the core hosting a service while it lives (beside its request key).
 inline std::string alive_key(std::string_view request_key) { return std::string{request_key} + ":alive"; }
 inline std::string services_key(const Pool& pool) { return pool.key("registry:", "services"); }
 inline std::string sources_key(const Pool& pool) { return pool.key("registry:", "sources"); }
@@ -22,7 +22,7 @@ inline std::string reply_key(const Pool& pool, std::uint64_t id) {
   return pool.key("reply:", pool.process_id() + ":" + std::to_string(id));
 }
 
-// A service's liveness: refreshed by its workers, gone this long after the last one died.
+// A service's liveness: refreshed by its hosting core, gone this long after the last such core died.
 inline constexpr std::chrono::milliseconds kAliveFor{3000};
 inline constexpr std::chrono::milliseconds kAliveRefresh{1000};
 // How long one blocking wait of a worker lasts before it looks around (a

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <exception>
+#include <expected>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -65,8 +66,6 @@ template <class In, class F>
 void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, const std::string& key,
                     const F& block, const std::weak_ptr<prime::detail::RuntimeState>& runtime, std::stop_token stop) {
   const std::string where = "service '" + name + "'";
-  const std::string alive = alive_key(key);
-  const std::string alive_ms = std::to_string(kAliveFor.count());
   const std::string wait = seconds_text(kWaitSlice);
   const auto report = [&](Error error) {
     if (auto r = runtime.lock()) r->report(std::move(error));
@@ -80,7 +79,6 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
     if (!lease) return;  // stopped
     auto& connection = **lease;
     StopGuard guard{connection, stop};
-    Clock::time_point refreshed{};
     while (true) {
       std::size_t queued = 0;
       for (const auto& command : outbox) {
@@ -90,11 +88,6 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
       }
       outbox.clear();
       const bool stopping = guard.stopping();
-      if (!stopping && Clock::now() - refreshed >= kAliveRefresh) {
-        connection.append({"SET", alive, "1", "PX", alive_ms});
-        ++queued;
-        refreshed = Clock::now();
-      }
       if (!stopping) {
         connection.set_timeout(kWaitSlice + kSocketMargin);
         connection.append({"BLPOP", key, wait});
@@ -176,6 +169,38 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
     }
     report({Errc::unreachable, where + ": lost " + pool->url() + "; reconnecting"});
   }
+}
+
+// Sets the alive keys `keys` (a service's liveness) for kAliveFor from now.
+inline std::expected<void, Error> mark_alive(Pool& pool, const std::vector<std::string>& keys) {
+  if (keys.empty()) return {};
+  auto lease = pool.acquire();
+  if (!lease) return std::unexpected(std::move(lease.error()));
+  auto& connection = **lease;
+  const auto ms = std::to_string(kAliveFor.count());
+  for (const auto& key : keys) connection.append({"SET", key, "1", "PX", ms});
+  if (!connection.flush()) {
+    lease->discard();
+    return std::unexpected(Error{Errc::unreachable, "lost " + pool.url()});
+  }
+  for (std::size_t n = 0; n < keys.size(); ++n) {
+    auto reply = connection.reply();
+    if (!reply) {
+      lease->discard();
+      return std::unexpected(std::move(reply.error()));
+    }
+    if (is_error(**reply)) return std::unexpected(server_error(**reply, "marking a service alive"));
+  }
+  return {};
+}
+
+// Keeps the alive keys of a process's services (`keys()`, asked each round)
+// set until `stop`: a service lives as long as the process hosting it and
+// its link to the server, however long its blocks run (a worker busy for
+// longer than kAliveFor is slow, not dead).
+inline void keep_alive(const std::shared_ptr<Pool>& pool, const std::function<std::vector<std::string>()>& keys,
+                       const std::stop_token& stop) {
+  while (pause(Clock::now() + kAliveRefresh, stop)) (void)mark_alive(*pool, keys());  // a lost server: the next round tries again
 }
 
 }  // namespace prime::optimus::detail
