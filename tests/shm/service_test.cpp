@@ -583,6 +583,31 @@ TEST_F(ServiceTest, AnOutputForAServiceMadeAnewNeverLandsInAnotherCallsCell) {
   EXPECT_EQ(**answer, 205) << "its own request's answer, never the post's";
 }
 
+// No caller frees a post's cells: when its route cannot go on (the next
+// service was made anew), the cells it held further on are freed all the same.
+TEST_F(ServiceTest, APostThatCannotGoOnFreesTheRestOfItsRoute) {
+  std::latch may_go{1};
+  core.serve("first", [&](const int& x) {
+    if (x < 0) may_go.wait();  // one worker: the post waits in the queue
+    return x;
+  });
+  core.serve("last", [](const int& x) { return x; }, {.calls_per_client = 1});
+  std::jthread blocker{[first = core.chain<int, int>("first")] { EXPECT_EQ(first(-1), -1); }};
+  ASSERT_TRUE(MappedTopic::within(10s, [&] { return listed(core, "first")->requests_from_callers == 1; }));
+  auto last = core.chain<int, int>("last");
+  {
+    shm::Core old_server{core.domain()};
+    old_server.serve("middle", [](const int& x) { return x; });
+    ASSERT_TRUE((core.chain<int, int>("first") | core.chain<int, int>("middle") | last).post(1));
+  }
+  shm::Core new_server{core.domain()};
+  new_server.serve("middle", [](const int& x) { return x; }, {.max_clients = 8});  // made anew
+  may_go.count_down();
+  blocker.join();
+  std::expected<int, Error> direct = std::unexpected(Error{});
+  EXPECT_TRUE(MappedTopic::within(10s, [&] { return (direct = last.call(3)).has_value(); })) << direct.error().describe();
+}
+
 // A server takes a service, then sets its limits: a caller that binds in
 // between finds no timeout set yet, and waits the default, not nothing.
 TEST_F(ServiceTest, ACallToAServiceWhoseLimitsAreNotSetYetWaitsTheDefault) {

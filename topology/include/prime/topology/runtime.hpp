@@ -91,8 +91,10 @@ void spawn_reader(const std::weak_ptr<RuntimeState>& runtime, Reader<T> reader, 
         try {
           on_sample(std::move(sample), stop);
         } catch (const std::exception& e) {
+          if (stop.stop_requested()) return;  // a wait in the chain ended by the stop: no error
           report(e.what());
         } catch (...) {
+          if (stop.stop_requested()) return;
           report("an exception of unknown type");
         }
       }

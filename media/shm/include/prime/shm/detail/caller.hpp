@@ -139,9 +139,10 @@ class Binding {
                                                            std::to_string(service.geometry().max_clients) + " clients (max_clients)"});
   }
 
-  // Gives the slot up, and its cells but those of posts under way: a post
+  // Gives the slot up, and its cells; with `keep_posts` (the last handle
+  // went: no call of this client runs) not those of posts under way: a post
   // is sent once post() returns, and its workers free its cells.
-  void release_slot() {
+  void release_slot(bool keep_posts = false) {
     if (!service_) return;
     auto& h = service_->header();
     const auto calls = service_->geometry().calls_per_client;
@@ -149,7 +150,7 @@ class Binding {
       const auto i = slot_ * calls + k;
       const auto state = Status::state(service_->cell(i).status.load());
       const bool post_under_way = service_->cell(i).posted != 0 && state != CellState::free && state != CellState::abandoned;
-      if (!post_under_way) service_->release(i);
+      if (!keep_posts || !post_under_way) service_->release(i);
     }
     h.clients[slot_].owner.store(0);
     service_.reset();
@@ -157,7 +158,7 @@ class Binding {
 
   void unbind() {
     std::scoped_lock lock{mutex_};
-    release_slot();
+    release_slot(true);
   }
 
   static std::unexpected<Error> not_found(std::string message) {
@@ -287,17 +288,17 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   };
   (void)prime::detail::spin_then_sleep(over, sleep, route.back()->qos().spin, deadline, std::stop_token{}, now);
   if (!answered()) {
-    // A cell a dead server's worker held for its output (forwarding) is held
-    // by no one: taken back, so that releasing frees it rather than leaving
-    // it abandoned to a worker that will never finish.
+    release_all();
+    // A cell a worker held for its output (forwarding) is now abandoned to
+    // it. One of a server that is dead (or stopped) is held by no one, and
+    // freed here. Looked at after the release, which leaves no cell for a
+    // newly started server's worker to take: a worker holding one now is
+    // one whose server is registered, so seen alive.
     for (std::size_t k = 1; k < held.size(); ++k) {
       const auto& before = *held[k - 1].service;
       if (const auto server = before.header().server.load(); server != 0 && before.registry().alive(server)) continue;
-      auto forwarding = Status::pack(held[k].ticket, CellState::forwarding);
-      held[k].service->cell(held[k].cell).status.compare_exchange_strong(forwarding,
-                                                                        Status::pack(held[k].ticket, CellState::claimed));
+      held[k].service->free_abandoned(held[k].cell, held[k].ticket);
     }
-    release_all();
     if (gone) return std::unexpected(std::move(*gone));
     return std::unexpected(Error{Errc::timeout, "service '" + route.front()->name() + "': no answer within the call's timeout"});
   }

@@ -148,7 +148,10 @@ class Server {
     std::size_t capacity = service_->geometry().max_reply_size;
     if (hops > 0) {
       next = following(route[0]);
-      if (!next || !take_over(*next, route[0])) return finish(i, ticket, false);  // its caller gave up
+      if (!next || !take_over(*next, route[0])) {  // its caller gave up, or the service is gone
+        if (c.posted) free_posted(route, 1, hops);  // no caller frees a post's later cells
+        return finish(i, ticket, false);
+      }
       out = next->request(route[0].cell);
       capacity = next->geometry().max_request_size;
     }
@@ -236,14 +239,10 @@ class Server {
     const auto first = route[0];
     const auto last = route[hops - 1];
     if (posted) {
-      for (std::uint32_t k = 0; k < hops; ++k) {
-        Service* at = k == 0 ? &next : following(route[k]);
-        if (!at || !at->has_cell(route[k].cell)) continue;
-        auto held = Status::pack(route[k].ticket, k == 0 ? CellState::forwarding : CellState::claimed);
-        if (!at->cell(route[k].cell).status.compare_exchange_strong(held, Status::pack(route[k].ticket + 1, CellState::free)))
-          at->free_abandoned(route[k].cell, route[k].ticket);
-      }
-      return;
+      auto held = Status::pack(first.ticket, CellState::forwarding);
+      if (!next.cell(first.cell).status.compare_exchange_strong(held, Status::pack(first.ticket + 1, CellState::free)))
+        next.free_abandoned(first.cell, first.ticket);
+      return free_posted(route, 1, hops);
     }
     if (hops > 1) {
       auto held = Status::pack(first.ticket, CellState::forwarding);
@@ -259,6 +258,17 @@ class Server {
       end->tail(last.cell).answered.ring();
     else
       end->free_abandoned(last.cell, last.ticket);
+  }
+
+  // Frees the cells a post's route holds from `from` on, claimed for
+  // outputs that will never come (no caller of a post frees them).
+  void free_posted(const Hop* route, std::uint32_t from, std::uint32_t hops) {
+    for (std::uint32_t k = from; k < hops; ++k) {
+      Service* at = following(route[k]);
+      if (!at || !at->has_cell(route[k].cell)) continue;
+      auto claimed = Status::pack(route[k].ticket, CellState::claimed);
+      at->cell(route[k].cell).status.compare_exchange_strong(claimed, Status::pack(route[k].ticket + 1, CellState::free));
+    }
   }
 
   static void write_error(CellHeader& c, CellTail& tail, const Error& error) {
@@ -300,11 +310,13 @@ class Server {
           recover_route(i, CellState::running);
           auto running = s;
           if (c.posted) {  // no one waits for a post's answer, nor releases its cell: freed here
-            c.status.compare_exchange_strong(running, Status::pack(ticket + 1, CellState::free));
+            if (!c.status.compare_exchange_strong(running, Status::pack(ticket + 1, CellState::free)))
+              service_->free_abandoned(i, ticket);
             break;
           }
           write_error(c, service_->tail(i), {Errc::peer_dead, "service '" + service_->name() + "': its server died while running this call"});
           if (c.status.compare_exchange_strong(running, Status::pack(ticket, CellState::failed))) service_->tail(i).answered.ring();
+          else service_->free_abandoned(i, ticket);  // its caller gave up meanwhile
           break;
         }
         case CellState::queued:
@@ -331,7 +343,10 @@ class Server {
     Hop route[kMaxHops - 1];
     std::copy(service_->tail(i).next, service_->tail(i).next + hops, route);
     Service* next = following(route[0]);
-    if (!next || !next->has_cell(route[0].cell)) return;
+    if (!next || !next->has_cell(route[0].cell)) {
+      if (state == CellState::running && service_->cell(i).posted) free_posted(route, 1, hops);
+      return;
+    }
     if (state == CellState::abandoned) return next->free_abandoned(route[0].cell, route[0].ticket);
     auto& status = next->cell(route[0].cell).status;
     auto claimed = Status::pack(route[0].ticket, CellState::claimed);
