@@ -51,7 +51,7 @@ struct DomainSummary {
       continue;
     }
     if (!snapshot) continue;
-    DomainSummary d{domain};
+    DomainSummary d{.name = domain};
     for (const auto& p : snapshot->participants) (p.alive ? d.participants_alive : d.participants_dead) += 1;
     d.topics = snapshot->topics.size();
     d.services = snapshot->services.size();
