@@ -7,7 +7,10 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <expected>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include "optimus/support/optimus_fixture.hpp"
 #include "support/failure.hpp"
@@ -81,11 +84,12 @@ TEST_F(OptimusCore, AuthenticatesWithAPassword) {
   EXPECT_EQ(core.chain([](int x) { return x * 3; })(5), 15);
 }
 
-// An ACL user that may touch only keys under "robot:" (and may not flush):
+// An ACL user that may touch only keys under "robot:" (and may not flush, nor
+// read the server's config, where a core looks up the longest string it takes):
 // everything the medium does works there, so it touches nothing outside its
 // domain; a core whose domain lies outside is refused by the server.
 TEST_F(OptimusCore, WorksForAnAclUserConfinedToItsDomain) {
-  RedisServer acl{{.extra = {"--user", "robot", "on", ">pw", "~robot:*", "&*", "+@all", "-flushall", "-flushdb",
+  RedisServer acl{{.extra = {"--user", "robot", "on", ">pw", "~robot:*", "&*", "+@all", "-flushall", "-flushdb", "-config",
                              "--user", "default", "off"}}};
   optimus::Options options{.url = acl.url(), .username = "robot", .password = "pw", .domain = "robot"};
   optimus::Core core{options};
@@ -107,6 +111,59 @@ TEST_F(OptimusCore, WorksForAnAclUserConfinedToItsDomain) {
   options.domain = "elsewhere";
   optimus::Core outsider{options};  // connecting is allowed; touching keys is not
   EXPECT_TRUE(fails_with([&] { (void)outsider.service<int, int>("twice"); }, Errc::unreachable, "NOPERM"));
+}
+
+// A server takes strings up to its proto-max-bulk-len (1 MiB here, the
+// least it allows); a longer one makes it drop the connection. A message
+// that long is refused before anything is sent, by name and with both sizes,
+// and nothing sent around it is lost: by a source (one value, a batch, a
+// stream), by a caller, by a service answering or handing on.
+TEST_F(OptimusCore, AMessageLongerThanTheServerTakesIsRefusedByNameAndLosesNothingElse) {
+  RedisServer small{{.extra = {"--proto-max-bulk-len", "1mb"}}};
+  optimus::Core core{optimus::Options{.url = small.url(), .domain = domain}};
+  const std::string big(std::size_t{2} << 20, 'x');
+  const std::string fine = "ok";
+  const auto refused = [](const std::expected<void, Error>& done, std::string_view what) {
+    if (done) return ::testing::AssertionFailure() << "not refused";
+    if (done.error().code != Errc::limit_exceeded || done.error().message.find(what) == std::string::npos ||
+        done.error().message.find("proto-max-bulk-len, 1048576 bytes") == std::string::npos)
+      return ::testing::AssertionFailure() << done.error().describe();
+    return ::testing::AssertionSuccess();
+  };
+
+  auto scans = core.publisher<std::string>("scans", {.capacity = 8});
+  auto reader = scans.source().subscribe({.capacity = 8});
+  EXPECT_TRUE(refused(scans.publish(big), "source 'scans': a message of 20971"));
+  ASSERT_TRUE(scans.publish(fine));
+  const std::vector<Sample<std::string>> batch{{fine, Clock::now()}, {big, Clock::now()}, {fine, Clock::now()}};
+  EXPECT_TRUE(refused(scans.publish_all(batch), "source 'scans': value 2 of a batch of 3 of 20971"));
+  {
+    auto stream = scans.streaming();
+    const std::vector<Sample<std::string>> first{{fine, Clock::now()}}, second{{big, Clock::now()}};
+    ASSERT_TRUE(stream.publish_all(first));
+    EXPECT_TRUE(refused(stream.publish_all(second), "value 1 of a batch of 1"));
+    ASSERT_TRUE(stream.flush()) << "the batch in flight before the refused one is answered";
+  }
+  const auto got = reader.read_all();
+  ASSERT_EQ(got.size(), 2u) << "the value published alone and the one streamed; nothing of the refused batch";
+  for (const auto& s : got) EXPECT_EQ(s.value, fine);
+
+  auto echo = core.serve("echo", [](std::string s) { return s; });
+  auto grow = core.serve("grow", [&](std::string s) { return s == "grow" ? big : s; });
+  auto caller = core.service<std::string, std::string>("echo");
+  const auto call_refused = [&](auto& chain, const std::string& in, std::string_view what) {
+    const auto start = Clock::now();
+    auto out = chain.call(in, Clock::now() + 30s);
+    if (Clock::now() - start > 10s) return ::testing::AssertionFailure() << "told only at the timeout";
+    return refused(out ? std::expected<void, Error>{} : std::unexpected(out.error()), what);
+  };
+  EXPECT_TRUE(call_refused(caller, big, "service 'echo': a request of 2097"));
+  EXPECT_EQ(caller(fine), fine);
+  EXPECT_TRUE(call_refused(grow, "grow", "service 'grow': its output of 2097"));
+  EXPECT_EQ(grow(fine), fine) << "the worker serves on";
+  auto linked = grow | echo;
+  EXPECT_TRUE(call_refused(linked, "grow", "service 'grow': its output for 'echo' of 2097"));
+  EXPECT_EQ(linked(fine), fine);
 }
 
 TEST_F(OptimusCore, DomainsSharingAServerDoNotSeeEachOther) {

@@ -61,6 +61,8 @@ inline std::expected<std::string, Error> call_segment(const Segment& segment, st
   const std::span<const std::string> rest{segment.keys.data() + 1, segment.keys.size() - 1};
   encode_request(id, reply, rest,
                  system_ms(std::chrono::system_clock::now() + remaining), payload, envelope);
+  if (auto fits = connection.fits(envelope.size(), [&] { return what() + ": a request"; }); !fits)
+    return std::unexpected(std::move(fits.error()));
   const auto wait = seconds_text(remaining);
   if (!connection.set_timeout(remaining + kSocketMargin))
     return std::unexpected(Error{Errc::unreachable, what() + ": cannot set a socket timeout"});

@@ -5,6 +5,7 @@
 #include <sys/socket.h>
 #include <sys/time.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <chrono>
@@ -111,6 +112,13 @@ class NoSigpipe {
 // A command's words. Views: the strings must outlive the call.
 using Args = std::initializer_list<std::string_view>;
 
+// The longest string a server takes in one piece where it does not say
+// (Redis's default proto-max-bulk-len, 512 MiB).
+inline constexpr std::size_t kDefaultMaxBulk = std::size_t{512} << 20;
+// The longest a message may be whatever the server takes: a service's
+// envelope (envelope.hpp) gives its payload a 32-bit length.
+inline constexpr std::size_t kMaxEnvelope = 0xffffffffu;
+
 // One connection to the server. Not thread-safe: hiredis contexts are not, so
 // each thread uses its own (see Pool). After an I/O error it is `broken()` and
 // must be dropped: a reply may be half read.
@@ -154,7 +162,18 @@ class Connection {
   // out here (an array of bulk strings): hiredis's own formatting of an
   // argument vector (sdscatfmt) took about 40 µs of the 92 a client spent
   // on a batch of 64 stream appends.
+  // A command with a string longer than the server takes is not sent: the
+  // server would drop the connection. It breaks this one instead, and the
+  // reply says why (callers check a message with fits() before that).
   void append(std::span<const std::string_view> args) {
+    ++pending_;
+    unsent_ = true;
+    for (const auto a : args)
+      if (a.size() > max_bulk_) {
+        oversized_ = a.size();
+        broken_ = true;
+      }
+    if (broken_) return;  // nothing more is sent on it
     command_.clear();
     put_length('*', args.size());
     for (const auto a : args) {
@@ -163,8 +182,6 @@ class Connection {
       command_.append("\r\n");
     }
     if (redisAppendFormattedCommand(ctx_.get(), command_.data(), command_.size()) != REDIS_OK) broken_ = true;
-    ++pending_;
-    unsent_ = true;
   }
   void append(Args args) { append(std::span<const std::string_view>{args.begin(), args.size()}); }
 
@@ -211,6 +228,36 @@ class Connection {
     return true;
   }
 
+  // Asks the server for the longest string it takes in one piece (its
+  // proto-max-bulk-len), which fits() goes by from then on; it stays the
+  // default where the server does not say (CONFIG refused by an ACL, or
+  // renamed away). A round trip: Pool asks once per connection it opens.
+  std::expected<void, Error> learn_max_bulk() {
+    auto r = command({"CONFIG", "GET", "proto-max-bulk-len"});
+    if (!r) return std::unexpected(std::move(r.error()));
+    const auto& reply = **r;
+    if (reply.type != REDIS_REPLY_ARRAY || reply.elements != 2 || reply.element[1]->str == nullptr) return {};
+    const std::string_view value{reply.element[1]->str, reply.element[1]->len};
+    std::size_t max = 0;
+    if (const auto [end, ec] = std::from_chars(value.data(), value.data() + value.size(), max);
+        ec == std::errc{} && end == value.data() + value.size() && max > 0)
+      max_bulk_ = std::min<std::size_t>(max, kMaxEnvelope);
+    return {};
+  }
+
+  // Whether a string of `bytes` (a message, or one wrapped for a service)
+  // goes to the server in one piece; else an error naming `what` and both
+  // sizes. Checked before anything is sent, so nothing else is lost.
+  // `what()` names it ("a message").
+  template <class What>
+  [[nodiscard]] std::expected<void, Error> fits(std::size_t bytes, What&& what) const {
+    if (bytes <= max_bulk_) return {};
+    return std::unexpected(Error{Errc::limit_exceeded, std::string{what()} + " of " + std::to_string(bytes) +
+                                                           " bytes is more than redis at " + url_ +
+                                                           " takes in one piece (its proto-max-bulk-len, " +
+                                                           std::to_string(max_bulk_) + " bytes); nothing was sent"});
+  }
+
   [[nodiscard]] bool broken() const noexcept { return broken_; }
   [[nodiscard]] bool valid() const noexcept { return ctx_ != nullptr; }
   [[nodiscard]] int pending() const noexcept { return pending_; }
@@ -239,6 +286,10 @@ class Connection {
   }
 
   Error io_error() const {
+    if (oversized_ != 0)
+      return Error{Errc::limit_exceeded, "redis at " + url_ + ": a command with a string of " + std::to_string(oversized_) +
+                                             " bytes, more than the server takes in one piece (its proto-max-bulk-len, " +
+                                             std::to_string(max_bulk_) + " bytes), was not sent; the connection is dropped"};
     std::string why = ctx_->err ? std::string{ctx_->errstr} : "connection lost";
     if (ctx_->err == REDIS_ERR_IO && (errno == EAGAIN || errno == EWOULDBLOCK)) why = "no answer in time";
     return Error{Errc::unreachable, "redis at " + url_ + ": " + why};
@@ -247,6 +298,8 @@ class Connection {
   std::unique_ptr<redisContext, ContextDeleter> ctx_;
   std::string url_;
   std::chrono::microseconds timeout_{-1};
+  std::size_t max_bulk_ = kDefaultMaxBulk;
+  std::size_t oversized_ = 0;  // the string that kept a command from being sent
   bool broken_ = false;
   bool unsent_ = false;  // commands appended since the last send
   int pending_ = 0;

@@ -86,6 +86,8 @@ class Pool : public std::enable_shared_from_this<Pool> {
       if (Clock::now() < retry_after_) return std::unexpected(last_error_);
     }
     auto connection = Connection::open(options_, endpoint_);
+    if (connection)
+      if (auto learned = connection->learn_max_bulk(); !learned) connection = std::unexpected(std::move(learned.error()));
     std::scoped_lock lock{mutex_};
     if (!connection) {
       last_error_ = connection.error();

@@ -142,19 +142,28 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
         encode_request(request->id, request->reply_key, rest, request->deadline_ms, *result, forwarded);
         const auto prefix = service_key(*pool, "");
         const auto next_name = next.starts_with(prefix) ? next.substr(prefix.size()) : next;
-        std::string refused;
-        encode_response(request->id, Errc::peer_dead,
-                        "service '" + next_name + "': no live worker serves it (next after '" + name + "' in a linked call)",
-                        {}, refused);
-        outbox.push_back({"EVAL", std::string{kForwardScript}, "3", next, alive_key(next), request->reply_key,
-                          std::move(forwarded), std::move(refused), ttl});
-        continue;
+        if (auto fits = connection.fits(forwarded.size(), [&] { return where + ": its output for '" + next_name + "'"; });
+            !fits) {
+          result = std::unexpected(std::move(fits.error()));  // said to the caller instead
+        } else {
+          std::string refused;
+          encode_response(request->id, Errc::peer_dead,
+                          "service '" + next_name + "': no live worker serves it (next after '" + name + "' in a linked call)",
+                          {}, refused);
+          outbox.push_back({"EVAL", std::string{kForwardScript}, "3", next, alive_key(next), request->reply_key,
+                            std::move(forwarded), std::move(refused), ttl});
+          continue;
+        }
       }
       std::string response;
-      if (result)
+      if (result) {
         encode_response(request->id, std::nullopt, {}, *result, response);
-      else
-        encode_response(request->id, result.error().code, result.error().message, {}, response);
+        if (auto fits = connection.fits(response.size(), [&] { return where + ": its output"; }); !fits) {
+          result = std::unexpected(std::move(fits.error()));  // said to the caller instead
+          response.clear();
+        }
+      }
+      if (!result) encode_response(request->id, result.error().code, result.error().message, {}, response);
       outbox.push_back({"RPUSH", request->reply_key, std::move(response)});
       outbox.push_back({"PEXPIRE", request->reply_key, ttl});
     }

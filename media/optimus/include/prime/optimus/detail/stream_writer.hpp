@@ -76,6 +76,7 @@ class StreamState {
     auto lease = pool_->acquire();
     if (!lease) return std::unexpected(named(lease.error()));
     auto& c = **lease;
+    if (auto fits = c.fits(message.size(), [] { return "a message"; }); !fits) return std::unexpected(named(fits.error()));
     c.set_timeout(command_timeout());
     const auto t = std::to_string(stamp_ns(stamp));
     if (qos_.overflow == Overflow::drop_oldest) {
@@ -116,6 +117,7 @@ class StreamState {
     auto lease = pool_->acquire();
     if (!lease) return std::unexpected(named(lease.error()));
     auto& c = **lease;
+    if (auto fits = fit(c, messages); !fits) return fits;
     c.set_timeout(command_timeout());
     return append_all(c, messages);
   }
@@ -144,6 +146,7 @@ class StreamState {
       (**f.lease).set_timeout(command_timeout());
     }
     auto& c = **f.lease;
+    if (auto fits = fit(c, batch); !fits) return fits;  // the batch in flight stays so
     std::optional<Epoch> epoch;
     if (const auto known = known_epoch(); known && (f.batch.empty() || *known == f.epoch)) {
       epoch = Epoch{*known, false};
@@ -223,6 +226,18 @@ class StreamState {
     std::vector<std::size_t> refused;
     std::optional<Error> failed;
   };
+
+  // Whether every message of a batch goes to the server in one piece: else
+  // none is sent, and the error names the first that does not.
+  std::expected<void, Error> fit(const Connection& c, std::span<const Message> messages) const {
+    for (std::size_t i = 0; i < messages.size(); ++i) {
+      auto fits = c.fits(messages[i].first.size(), [&] {
+        return "value " + std::to_string(i + 1) + " of a batch of " + std::to_string(messages.size());
+      });
+      if (!fits) return std::unexpected(named(fits.error()));
+    }
+    return {};
+  }
 
   // Appends all of `messages` on `c`, sending what the server refuses again
   // (at most kAppendAttempts times), in order, in the epoch it learns.
