@@ -143,6 +143,47 @@ TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleLeavesADropOldestPublishe
   EXPECT_EQ(core.reclaim(), 1u) << "the dead subscriber's slot (and the sample it held) is reclaimed";
 }
 
+// A process killed while it cleared a dead subscriber's slot leaves the slot
+// naming it as the clearer, with some of the dead subscriber's holds still
+// set: the state written below (a clearer dies between two steps at any
+// time; no test can stop it there). A slot whose clearer lives is left to
+// it; one whose clearer died is cleared again by the next participant that
+// looks, and is not lost for as long as the topic lives.
+TEST(ShmProcesses, ASubscriberSlotWhoseClearerWasKilledIsClearedAgain) {
+  const auto domain = unique_domain("killed-clearer");
+  shm::Core core{domain};
+  auto publisher = core.publisher<std::uint64_t>("scan", {.capacity = 4});  // drop_oldest
+  PeerProcess holder{{"hold", domain, "scan", "4", "drop", "view"}};
+  ASSERT_TRUE(holder.says("subscribed"));
+  ASSERT_TRUE(publisher.publish(0));
+  ASSERT_TRUE(holder.says("holding"));
+  const MappedTopic mapped{domain, "scan"};
+  auto& h = mapped.header();
+  std::size_t slot = 0;
+  while (slot < shm::detail::kSlots && h.subscribers[slot].owner.load() == 0) ++slot;
+  ASSERT_LT(slot, shm::detail::kSlots);
+  const auto dead = h.subscribers[slot].owner.load();
+  const auto held_by_slot = [&] {
+    std::size_t n = 0;
+    for (std::size_t c = 0; c < h.chunk_count; ++c) n += (mapped.holders(c) >> slot) & 1;
+    return n;
+  };
+  ASSERT_EQ(held_by_slot(), 1u);
+  holder.kill9();
+
+  h.subscribers[slot].owner.store(shm::detail::kReclaimingBit | h.publisher.load());  // a live clearer: this process
+  EXPECT_EQ(core.reclaim(), 0u) << "a slot a live participant clears is left to it";
+  h.subscribers[slot].owner.store(shm::detail::kReclaimingBit | dead);  // a clearer killed half way
+  EXPECT_EQ(core.reclaim(), 1u);
+  EXPECT_EQ(h.subscribers[slot].owner.load(), 0u) << "the slot is free again";
+  EXPECT_EQ(held_by_slot(), 0u) << "and so is the sample the dead subscriber held";
+  auto reader = core.subscribe<std::uint64_t>("scan", {}, {.capacity = 4}).subscribe();
+  ASSERT_TRUE(publisher.publish(1));
+  auto got = reader.try_read();
+  ASSERT_TRUE(got);
+  EXPECT_EQ(*got->value, 1u);
+}
+
 // Reads what a publisher process overwrites heavily, one sample at a time
 // or (`batches`) every sample available in one read_some; the publisher
 // publishes one at a time or (`published_in_batches`) up to a ring at once,

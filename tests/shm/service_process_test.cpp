@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdint>
 #include <latch>
+#include <new>
 #include <optional>
 #include <string>
 #include <thread>
@@ -196,6 +197,31 @@ TEST(ShmServiceProcesses, ACallerKilledMidCallLeavesNothingStuck) {
   EXPECT_EQ(std::count(clients.begin(), clients.end(), dead_pid), 0) << "the dead caller's client slot was reclaimed";
   auto newcomer = core.chain<std::int64_t, std::int64_t>("gate");
   EXPECT_EQ(newcomer(7), 7) << "its slot serves a new client (max_clients 2)";
+}
+
+// As ShmProcesses.ASubscriberSlotWhoseClearerWasKilledIsClearedAgain, for a
+// client slot: a caller killed, then the process clearing its slot killed
+// half way (the state written below). The slot is cleared again, and serves
+// a new client of a service that has room for one.
+TEST(ShmServiceProcesses, AClientSlotWhoseClearerWasKilledIsClearedAgain) {
+  const auto domain = unique_domain("killed-clearer");
+  shm::Core core{domain};
+  (void)core.serve("echo", [](const std::int64_t& x) { return x; }, {.max_clients = 1});
+  PeerProcess caller{{"call_once", domain, "echo", "5"}};
+  ASSERT_TRUE(caller.says("answer 5"));  // and it keeps its client slot
+  auto segment = shm::detail::Segment::open_existing(shm::detail::segment_name(domain, "service", "echo"));
+  ASSERT_TRUE(segment);
+  auto& h = *std::launder(reinterpret_cast<shm::detail::ServiceHeader*>(segment->data()));
+  const auto dead = h.clients[0].owner.load();
+  ASSERT_NE(dead, 0u);
+  caller.kill9();
+
+  h.clients[0].owner.store(shm::detail::kReclaimingBit | h.server.load());  // a live clearer: this process
+  EXPECT_EQ(core.reclaim(), 0u) << "a slot a live participant clears is left to it";
+  h.clients[0].owner.store(shm::detail::kReclaimingBit | dead);  // a clearer killed half way
+  EXPECT_EQ(core.reclaim(), 1u);
+  auto newcomer = core.chain<std::int64_t, std::int64_t>("echo");
+  EXPECT_EQ(newcomer(7), 7) << "the slot serves a new client (max_clients 1)";
 }
 
 TEST(ShmServiceProcesses, ServicesOfOtherProcessesLinkAndWorkInEveryCombinator) {

@@ -23,7 +23,7 @@ struct DomainSummary {
   std::size_t participants_dead = 0;  // listed, but their lease is gone
   std::size_t topics = 0;
   std::size_t services = 0;
-  std::string unreadable;  // why it could not be looked at (another user's, say); the counts are then 0
+  std::string unreadable{};  // why it could not be looked at (another user's, say); the counts are then 0
 };
 
 // What domain `domain` holds now, or nothing when it does not exist.

@@ -47,7 +47,12 @@ static_assert(std::atomic<std::uint32_t>::is_always_lock_free, "shared memory ne
 // generation, so a later participant in the same slot is another one.
 // Zero means nobody.
 using ParticipantId = std::uint64_t;
-inline constexpr ParticipantId kReclaiming = ~0ull;  // a slot whose dead owner is being cleared
+// A slot (a topic's subscriber's, a service's client's) whose dead owner is
+// being cleared names the participant clearing it, with this bit: one that
+// dies clearing it leaves it to the next, which clears it again (each step
+// can be done twice). Ids count up from 1 << kSlotBits (registry.hpp): they
+// never reach it.
+inline constexpr ParticipantId kReclaimingBit = 1ull << 63;
 
 inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;  // "PRIMESM4"
 inline constexpr std::uint32_t kLayoutVersion = 12;

@@ -102,17 +102,27 @@ class Registry : public std::enable_shared_from_this<Registry> {
   // Whether the participant `id` still lives: it is still in its slot, and
   // someone holds that slot's lease. One system call.
   [[nodiscard]] bool alive(ParticipantId id) const {
-    if (id == 0 || id == kReclaiming) return false;
+    if (id == 0 || (id & kReclaimingBit) != 0) return false;
     if (id == me_) return true;
     const auto slot = slot_of(id);
     if (slot >= kMaxParticipants || layout().participants[slot].id.load() != id) return false;
     return locked_by_other(segment_.fd(), lease_byte(slot));
   }
 
+  // Takes a slot whose owner (the word `owner`) is dead, or died clearing
+  // it, for this participant to clear: the word then names this one as
+  // clearing it, until the clearer sets it to 0. False when the slot is
+  // free, its owner or clearer lives, or another took it first.
+  [[nodiscard]] bool take_to_clear(std::atomic<ParticipantId>& owner) const {
+    auto id = owner.load();
+    if (id == 0 || alive(id & ~kReclaimingBit)) return false;
+    return owner.compare_exchange_strong(id, kReclaimingBit | me_);
+  }
+
   // "participant 'planner' (pid 42)", for errors that name a peer.
   [[nodiscard]] std::string describe(ParticipantId id) const {
     const auto slot = slot_of(id);
-    if (id == 0 || id == kReclaiming || slot >= kMaxParticipants) return "no participant";
+    if (id == 0 || (id & kReclaimingBit) != 0 || slot >= kMaxParticipants) return "no participant";
     const auto& p = layout().participants[slot];
     if (p.id.load() != id) return "a participant that left";
     std::string text = "participant '" + read_text(p.name) + "' (pid " + std::to_string(p.pid);

@@ -146,9 +146,7 @@ class Service {
     std::size_t n = 0;
     for (std::size_t c = 0; c < geometry_.max_clients; ++c) {
       auto& slot = header_->clients[c];
-      auto owner = slot.owner.load();
-      if (owner == 0 || owner == kReclaiming || registry_->alive(owner)) continue;
-      if (!slot.owner.compare_exchange_strong(owner, kReclaiming)) continue;
+      if (!registry_->take_to_clear(slot.owner)) continue;
       for (std::size_t k = 0; k < geometry_.calls_per_client; ++k) release(c * geometry_.calls_per_client + k);
       slot.last_request.store(0);
       slot.owner.store(0);

@@ -124,9 +124,7 @@ class Topic {
   // one caller wins the slot. Returns whether it cleared anything.
   bool reclaim_subscriber(std::size_t i) const {
     auto& slot = header_->subscribers[i];
-    auto owner = slot.owner.load();
-    if (owner == 0 || owner == kReclaiming || registry_->alive(owner)) return false;
-    if (!slot.owner.compare_exchange_strong(owner, kReclaiming)) return false;
+    if (!registry_->take_to_clear(slot.owner)) return false;
     release_subscriber_holds(i);
     slot.cursor.store(kNoCursor);
     slot.lagging.store(0);
