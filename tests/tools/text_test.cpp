@@ -23,6 +23,19 @@ TEST(Json, EscapesInAStringAreTheCharactersTheyStandFor) {
   EXPECT_THROW((void)parse_json(R"("\u12")"), std::invalid_argument);
 }
 
+// What a tool prints as JSON is JSON whatever a message's text holds: each
+// byte that is not part of a UTF-8 character is U+FFFD; UTF-8 is kept as it is.
+TEST(Json, TextThatIsNotUtf8IsQuotedAsJsonWithEachStrayByteReplaced) {
+  EXPECT_EQ(quote("caf\xc3\xa9 \xf0\x9f\xa4\x96"), "\"caf\xc3\xa9 \xf0\x9f\xa4\x96\"");
+  EXPECT_EQ(quote("caf\xe9"), R"("caf\ufffd")") << "Latin-1";
+  EXPECT_EQ(quote("\x80x\xff"), R"("\ufffdx\ufffd")") << "stray bytes";
+  EXPECT_EQ(quote("\xc3"), R"("\ufffd")") << "a character cut short";
+  EXPECT_EQ(quote("\xc0\xaf"), R"("\ufffd\ufffd")") << "an overlong '/'";
+  EXPECT_EQ(quote("\xed\xa0\x80"), R"("\ufffd\ufffd\ufffd")") << "a surrogate";
+  EXPECT_EQ(quote("\xf4\x90\x80\x80"), R"("\ufffd\ufffd\ufffd\ufffd")") << "past U+10FFFF";
+  EXPECT_EQ(string_of(quote("a\xff" "b\n\"")), "a\xef\xbf\xbd" "b\n\"") << "and it reads back";
+}
+
 TEST(Dot, ALabelsLinesAreJoinedByALineBreakAndEachIsEscaped) {
   EXPECT_EQ(dot_label({"planner", "Path -> Pose"}), R"("planner\nPath -> Pose")");
   EXPECT_EQ(dot_label({"a \"quoted\" name"}), R"("a \"quoted\" name")");

@@ -152,10 +152,44 @@ inline Json parse_json(std::string_view text) {
   return result;
 }
 
-// Writes `s` as a JSON string.
+// How many bytes of well-formed UTF-8 start `s` (one character), or 0 when
+// they are not: a stray continuation byte, a truncated or overlong
+// sequence, a surrogate, or a code point past U+10FFFF.
+inline std::size_t utf8_length(std::string_view s) {
+  const auto byte = [&](std::size_t i) { return static_cast<unsigned char>(s[i]); };
+  const auto lead = byte(0);
+  if (lead < 0x80) return 1;
+  const std::size_t n = lead >= 0xc2 && lead <= 0xdf ? 2 : lead >= 0xe0 && lead <= 0xef ? 3 : lead >= 0xf0 && lead <= 0xf4 ? 4 : 0;
+  if (n == 0 || s.size() < n) return 0;
+  for (std::size_t i = 1; i < n; ++i)
+    if ((byte(i) & 0xc0) != 0x80) return 0;
+  // The second byte's range where the lead alone does not rule out an
+  // overlong form, a surrogate (U+D800..DFFF) or a code point past U+10FFFF.
+  if ((lead == 0xe0 && byte(1) < 0xa0) || (lead == 0xed && byte(1) > 0x9f) || (lead == 0xf0 && byte(1) < 0x90) ||
+      (lead == 0xf4 && byte(1) > 0x8f))
+    return 0;
+  return n;
+}
+
+// `s` as a JSON string. Text that is not UTF-8 (a message's characters in
+// another encoding, or bytes that are not text) would make the whole output
+// something no JSON reader takes: each byte that is not part of a UTF-8
+// character becomes U+FFFD, the replacement character.
 inline std::string quote(std::string_view s) {
   std::string out = "\"";
-  for (char c : s) {
+  for (std::size_t at = 0; at < s.size();) {
+    const char c = s[at];
+    const auto length = utf8_length(s.substr(at));
+    if (length == 0) {
+      out += "\\ufffd";
+      ++at;
+      continue;
+    }
+    if (length > 1) {
+      out.append(s.substr(at, length));
+      at += length;
+      continue;
+    }
     if (c == '"' || c == '\\') out.push_back('\\');
     if (static_cast<unsigned char>(c) < 0x20) {
       char hex[8];
@@ -164,6 +198,7 @@ inline std::string quote(std::string_view s) {
     } else {
       out.push_back(c);
     }
+    ++at;
   }
   return out + "\"";
 }

@@ -60,7 +60,8 @@ inline std::expected<std::string, Error> call_segment(const Segment& segment, st
   envelope.reserve(payload.size() + reply.size() + 64);
   const std::span<const std::string> rest{segment.keys.data() + 1, segment.keys.size() - 1};
   encode_request(id, reply, rest,
-                 system_ms(std::chrono::system_clock::now() + remaining), payload, envelope);
+                 segment.pool->server_ms() + std::chrono::duration_cast<std::chrono::milliseconds>(remaining).count(),
+                 payload, envelope);
   if (auto fits = connection.fits(envelope.size(), [&] { return what() + ": a request"; }); !fits)
     return std::unexpected(std::move(fits.error()));
   const auto wait = seconds_text(remaining);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <charconv>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -75,19 +76,31 @@ class Pool : public std::enable_shared_from_this<Pool> {
 
   std::expected<Lease, Error> acquire() {
     std::uint64_t epoch;
+    std::optional<Connection> idle;
+    bool clock_due = false;
     {
       std::scoped_lock lock{mutex_};
       epoch = epoch_;
-      while (!idle_.empty()) {
+      while (!idle && !idle_.empty()) {
         auto [connection, born] = std::move(idle_.back());
         idle_.pop_back();
-        if (born == epoch_) return Lease{shared_from_this(), std::move(connection), born};
+        if (born == epoch_) idle.emplace(std::move(connection));
       }
-      if (Clock::now() < retry_after_) return std::unexpected(last_error_);
+      if (idle && Clock::now() >= clock_due_) {
+        clock_due_ = Clock::now() + kClockEvery;
+        clock_due = true;
+      }
+      if (!idle && Clock::now() < retry_after_) return std::unexpected(last_error_);
+    }
+    if (idle) {
+      if (clock_due) learn_clock(*idle);  // one round trip, every kClockEvery
+      return Lease{shared_from_this(), std::move(*idle), epoch};
     }
     auto connection = Connection::open(options_, endpoint_);
-    if (connection)
+    if (connection) {
       if (auto learned = connection->learn_max_bulk(); !learned) connection = std::unexpected(std::move(learned.error()));
+      else learn_clock(*connection);
+    }
     std::scoped_lock lock{mutex_};
     if (!connection) {
       last_error_ = connection.error();
@@ -97,6 +110,7 @@ class Pool : public std::enable_shared_from_this<Pool> {
       return std::unexpected(std::move(connection.error()));
     }
     backoff_ = std::chrono::milliseconds{0};
+    clock_due_ = Clock::now() + kClockEvery;
     return Lease{shared_from_this(), std::move(*connection), epoch};
   }
 
@@ -157,6 +171,17 @@ class Pool : public std::enable_shared_from_this<Pool> {
     return k.append(options_.domain).append(":").append(kind).append(name);
   }
 
+  // The server's clock now, in ms since the epoch: this machine's system
+  // clock and how far the server's is ahead of it, which the pool measures
+  // on each connection it opens and, every kClockEvery, on one it lends
+  // out. The deadlines of service calls are on the server's clock, so a
+  // caller and a worker agree on them even when their machines' clocks do
+  // not (robots off the network rarely keep theirs in step); to within
+  // half a round trip.
+  [[nodiscard]] std::int64_t server_ms() const {
+    return system_ms_now() + server_ahead_ms_.load(std::memory_order_relaxed);
+  }
+
   // A name no other process shares: for reply keys and anonymous services.
   [[nodiscard]] const std::string& process_id() const noexcept { return process_id_; }
   [[nodiscard]] std::uint64_t next_id() noexcept { return next_id_.fetch_add(1, std::memory_order_relaxed); }
@@ -165,6 +190,7 @@ class Pool : public std::enable_shared_from_this<Pool> {
   static constexpr std::chrono::milliseconds kFirstBackoff{10};
   static constexpr std::chrono::milliseconds kMaxBackoff{1000};
   static constexpr std::size_t kMaxIdle = 32;
+  static constexpr std::chrono::seconds kClockEvery{10};  // clocks off the network drift by ms a minute
 
   Pool(Options options, Endpoint endpoint) : options_{std::move(options)}, endpoint_{std::move(endpoint)} {
     std::random_device entropy;
@@ -174,6 +200,27 @@ class Pool : public std::enable_shared_from_this<Pool> {
     const int n = std::snprintf(buffer, sizeof buffer, "%d.%016llx", static_cast<int>(::getpid()),
                                 static_cast<unsigned long long>(r));
     process_id_.assign(buffer, static_cast<std::size_t>(n));
+  }
+
+  static std::int64_t system_ms_now() {
+    return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  }
+
+  // Asks the server for its clock (TIME) and keeps how far it is ahead of
+  // this machine's, taking the reply as read halfway through the round trip.
+  // A failed ask changes nothing: the connection says it broke when next used.
+  void learn_clock(Connection& connection) {
+    const auto sent = system_ms_now();
+    auto time = connection.command({"TIME"});
+    const auto received = system_ms_now();
+    if (!time || (*time)->type != REDIS_REPLY_ARRAY || (*time)->elements != 2) return;
+    std::int64_t seconds = 0, micros = 0;
+    const auto number = [](const redisReply* r, std::int64_t& out) {
+      return r->str != nullptr && std::from_chars(r->str, r->str + r->len, out).ec == std::errc{};
+    };
+    if (!number((*time)->element[0], seconds) || !number((*time)->element[1], micros)) return;
+    server_ahead_ms_.store(seconds * 1000 + micros / 1000 - (sent + (received - sent) / 2), std::memory_order_relaxed);
   }
 
   void give_back(Connection connection, std::uint64_t born) {
@@ -196,6 +243,8 @@ class Pool : public std::enable_shared_from_this<Pool> {
   std::uint64_t epoch_ = 0;
   std::chrono::milliseconds backoff_{0};
   Clock::time_point retry_after_{};
+  Clock::time_point clock_due_{};  // when to measure the server's clock again
+  std::atomic<std::int64_t> server_ahead_ms_{0};
   Error last_error_{Errc::unreachable, ""};
   std::mutex calls_mutex_;
   std::condition_variable calls_done_;

@@ -128,11 +128,11 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
         continue;
       }
       if (request->deadline_ms != 0 &&
-          system_ms(std::chrono::system_clock::now()) > request->deadline_ms)
+          pool->server_ms() > request->deadline_ms)
         continue;  // its caller has given up: running it would answer nobody
       auto result = run_block<In>(block, request->payload, where);
       // An answer nobody takes (its caller gave up) goes away by itself.
-      const auto left = request->deadline_ms - system_ms(std::chrono::system_clock::now());
+      const auto left = request->deadline_ms - pool->server_ms();
       const auto ttl = std::to_string(std::max<std::int64_t>(left, 0) + 10'000);
       if (result && !request->route.empty()) {
         const auto& next = request->route.front();
