@@ -321,7 +321,9 @@ TEST(PrimeTool, ObservingABlockTopicNeverSlowsItsPublisher) {
   EXPECT_EQ(reader.lost(), 0u);
 }
 
-TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndHzMeasuresASource) {
+// ls, and hz, bw, delay and echo on a source, as on a shared-memory topic
+// (the figures and --json are the same code for both).
+TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndTheWatchCommandsReadASource) {
   RedisServer server;
   const auto domain = unique_domain("tool-optimus");
   optimus::Core core{optimus::Options{.url = server.url(), .domain = domain}};
@@ -340,16 +342,34 @@ TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndHzMeasuresASource) {
   EXPECT_EQ(text(json.object().at("sources").array().at(0), "name"), "ticks");
   EXPECT_EQ(json.object().at("services").array().at(0).object().at("alive").value, tool::Json{true}.value);
 
-  auto hz = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "--redis", server.url(), "--json", "hz", "ticks",
-                                  "--duration", "2"},
-                                 true);
+  const auto watching = [&](const std::string& command, std::vector<std::string> more) {
+    std::vector<std::string> argv{PRIME_TOOL_PATH, "--domain", domain, "--redis", server.url(), "--json", command, "ticks"};
+    argv.insert(argv.end(), more.begin(), more.end());
+    return PeerProcess::command(argv, true);
+  };
+  auto hz = watching("hz", {"--duration", "2"});
+  auto bw = watching("bw", {"--duration", "2"});
+  auto delay = watching("delay", {"--duration", "2"});
+  auto echo = watching("echo", {"-n", "3"});
   for (auto next = Clock::now(), end = next + 2500ms; next < end; next += 10ms) {  // 100 Hz
     std::this_thread::sleep_until(next);
-    ASSERT_TRUE(ticks.publish(1));
+    ASSERT_TRUE(ticks.publish(1, Clock::now() - 5ms));  // taken 5 ms ago
   }
-  const auto rate = number(last_json(hz.all_output()), "rate");
-  EXPECT_GT(rate, 70) << "a 100 Hz source (over Redis, on a busy machine)";
-  EXPECT_LT(rate, 130);
+  const auto rate = last_json(hz.all_output());
+  EXPECT_GT(number(rate, "rate"), 70) << "a 100 Hz source (over Redis, on a busy machine)";
+  EXPECT_LT(number(rate, "rate"), 130);
+  EXPECT_GT(number(rate, "stddev"), 0);
+  const auto bandwidth = last_json(bw.all_output());
+  EXPECT_EQ(number(bandwidth, "mean_size"), 20) << "an int and Optimus's 16-byte header";
+  EXPECT_GT(number(bandwidth, "bytes_per_second"), 70 * 20) << "bytes per second, not per sample";
+  EXPECT_LT(number(bandwidth, "bytes_per_second"), 130 * 20);
+  const auto ages = last_json(delay.all_output());
+  EXPECT_GE(number(ages, "p50"), 0.005) << "each sample was taken 5 ms before it was published";
+  EXPECT_LT(number(ages, "p50"), 1);
+  const auto echoed = echo.all_output();
+  const auto sample = last_json(echoed);
+  EXPECT_EQ(number(sample, "size"), 20) << echoed;
+  EXPECT_GT(number(sample, "stamp_ns"), 0) << echoed;
 
   // A reader that values were dropped for (block policy, it read nothing in
   // time) has a second field in the readers hash, and is still one reader.

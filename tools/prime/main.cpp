@@ -83,16 +83,16 @@ int main(int argc, char** argv) {
   command("info", "one topic or service in full", [&] { return shm_info(o); }, [&] { return optimus_info(o); })
       ->add_option("name", o.name, "the topic or service")
       ->required();
-  auto* hz = command("hz", "a topic's rate: mean, min and max period, standard deviation", [&] { return shm_hz(o); },
+  auto* hz = command("hz", "a topic's rate: mean, min and max period, standard deviation", [&] { return shm_watch(o, "hz"); },
                      [&] { return optimus_watch(o, "hz"); });
   hz->add_option("topic", o.name)->required();
   duration(hz);
-  auto* bw = command("bw", "a topic's bandwidth, bytes per second", [&] { return shm_bw(o); },
+  auto* bw = command("bw", "a topic's bandwidth, bytes per second", [&] { return shm_watch(o, "bw"); },
                      [&] { return optimus_watch(o, "bw"); });
   bw->add_option("topic", o.name)->required();
   duration(bw);
   auto* delay = command("delay", "how old each sample is when it arrives, from its stamp (mean, p50, p99, max)",
-                        [&] { return shm_delay(o); }, [&] { return optimus_watch(o, "delay"); });
+                        [&] { return shm_watch(o, "delay"); }, [&] { return optimus_watch(o, "delay"); });
   delay->add_option("topic", o.name)->required();
   duration(delay);
   auto* echo = command("echo", "a topic's samples, field by field", [&] { return shm_echo(o); },

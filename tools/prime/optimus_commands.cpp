@@ -1,6 +1,10 @@
 // `prime --redis URL` on Optimus domains: their sources (Redis streams) and
 // services, as the registry hashes of the domain list them.
+#include <algorithm>
+#include <charconv>
 #include <chrono>
+#include <cstdint>
+#include <deque>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -20,6 +24,7 @@
 #include "shm_commands.hpp"
 #include "stats.hpp"
 #include "table.hpp"
+#include "watch.hpp"
 
 namespace prime::tool {
 
@@ -90,6 +95,57 @@ Endpoints endpoints(Redis& r, const Options& o) {
   return {hash(r, o.domain + ":registry:sources"), hash(r, o.domain + ":registry:services")};
 }
 
+// The entries appended to a source's stream from now on, one at a time
+// (read a hundred at a time).
+class StreamTail {
+ public:
+  struct Entry {
+    std::string id{};
+    std::optional<Clock::time_point> stamp{};  // its sensor's; none in an entry not Prime's
+    std::string data{};
+  };
+
+  StreamTail(Redis& r, std::string stream) : r_{r}, stream_{std::move(stream)} {}
+
+  // The next entry, waiting for it up to `timeout`.
+  std::optional<Entry> next(Clock::duration timeout) {
+    if (buffered_.empty()) {
+      // At least 1 ms: BLOCK 0 would wait for ever.
+      const auto ms = std::max<long long>(1, std::chrono::duration_cast<std::chrono::milliseconds>(timeout).count());
+      auto reply = r_.command({"XREAD", "COUNT", "100", "BLOCK", std::to_string(ms), "STREAMS", stream_, last_});
+      if (reply->type == REDIS_REPLY_ARRAY && reply->elements > 0) {
+        const auto* entries = reply->element[0]->element[1];
+        for (std::size_t i = 0; i < entries->elements; ++i) buffered_.push_back(entry(*entries->element[i]));
+        if (!buffered_.empty()) last_ = buffered_.back().id;
+      }
+    }
+    if (buffered_.empty()) return std::nullopt;
+    auto front = std::move(buffered_.front());
+    buffered_.pop_front();
+    return front;
+  }
+
+ private:
+  static Entry entry(const redisReply& e) {
+    Entry out{.id = std::string{e.element[0]->str, e.element[0]->len}};
+    const auto& fields = *e.element[1];
+    for (std::size_t f = 0; f + 1 < fields.elements; f += 2) {
+      const std::string_view name{fields.element[f]->str, fields.element[f]->len};
+      const std::string_view value{fields.element[f + 1]->str, fields.element[f + 1]->len};
+      if (name == "d") out.data = std::string{value};
+      std::int64_t ns = 0;
+      if (name == "t" && std::from_chars(value.data(), value.data() + value.size(), ns).ec == std::errc{})
+        out.stamp = Clock::time_point{std::chrono::nanoseconds{ns}};
+    }
+    return out;
+  }
+
+  Redis& r_;
+  std::string stream_;
+  std::string last_ = "$";
+  std::deque<Entry> buffered_;
+};
+
 }  // namespace
 
 int optimus_ls(const Options& o) {
@@ -149,69 +205,36 @@ int optimus_info(const Options& o) {
 
 int optimus_watch(const Options& o, const std::string& command) {
   Redis r{o.redis};
-  const auto e = endpoints(r, o);
-  if (!e.sources.contains(o.name))
+  if (!endpoints(r, o).sources.contains(o.name))
     throw Failure{{Errc::not_found, "no source '" + o.name + "' in Optimus domain '" + o.domain + "'"}};
-  const auto stream = o.domain + ":src:" + o.name;
-  std::string last = "$";
-  Window values{o.window};
-  std::optional<Clock::time_point> previous;
-  std::size_t seen = 0;
-  const auto start = Clock::now();
-  auto next_report = start + std::chrono::seconds{1};
-  auto report = [&] {
-    if (values.count() == 0) return;
-    if (command == "hz")
-      std::cout << (o.json ? "{\"topic\":" + quote(o.name) + ",\"rate\":" + std::to_string(1 / values.mean()) + "}"
-                           : "average rate: " + std::to_string(1 / values.mean()))
-                << std::endl;
-    else if (command == "bw")
-      std::cout << "average: " << values.mean() << " bytes per sample" << std::endl;
-    else if (command == "delay")
-      std::cout << "average delay: " << values.mean() << "s p99: " << values.percentile(0.99) << "s max: " << values.max()
-                << "s" << std::endl;
-  };
+  StreamTail tail{r, o.domain + ":src:" + o.name};
+  if (command != "echo")
+    return watch(o, command, [&](Clock::duration timeout) -> std::optional<Arrival> {
+      auto entry = tail.next(timeout);
+      if (!entry) return std::nullopt;
+      return Arrival{entry->data.size(), entry->stamp.value_or(Clock::now())};
+    });
   finish_on_ctrl_c();
-  const auto first_by = command == "echo" ? first_sample_by(o, start) : Clock::time_point::max();
-  while (!ctrl_c_pressed() && (o.count == 0 || seen < o.count) &&
-         (o.duration == 0 || Clock::now() - start < std::chrono::duration<double>(o.duration))) {
-    if (seen == 0 && Clock::now() >= first_by) return nothing_published(o);
-    auto reply = r.command({"XREAD", "COUNT", "100", "BLOCK", "200", "STREAMS", stream, last});
-    if (reply->type == REDIS_REPLY_ARRAY && reply->elements > 0) {
-      const auto* entries = reply->element[0]->element[1];
-      for (std::size_t i = 0; i < entries->elements; ++i) {
-        const auto* entry = entries->element[i];
-        last = std::string{entry->element[0]->str, entry->element[0]->len};
-        std::map<std::string, std::string> fields;
-        for (std::size_t f = 0; f + 1 < entry->element[1]->elements; f += 2)
-          fields[entry->element[1]->element[f]->str] =
-              std::string{entry->element[1]->element[f + 1]->str, entry->element[1]->element[f + 1]->len};
-        ++seen;
-        const auto now = Clock::now();
-        const auto data = fields["d"];
-        if (command == "echo") {
-          const std::span<const std::byte> bytes{reinterpret_cast<const std::byte*>(data.data()), data.size()};
-          const auto id = prime::optimus::detail::entry_id(last);
-          std::cout << "sequence: " << (id ? std::to_string(id->seq) : "?") << "\nstamp: " << fields["t"] << " ns\nsize: " << data.size()
-                    << "\nbytes: " << hex(bytes) << "\n---" << std::endl;
-        } else if (command == "hz") {
-          if (previous) values.add(std::chrono::duration<double>(now - *previous).count());
-          previous = now;
-        } else if (command == "bw") {
-          values.add(static_cast<double>(data.size()));
-        } else {
-          const auto stamp = Clock::time_point{std::chrono::nanoseconds{std::stoll(fields["t"])}};
-          values.add(std::chrono::duration<double>(now - stamp).count());
-        }
-        if (o.count > 0 && seen >= o.count) break;
-      }
+  std::size_t seen = 0;
+  const auto first_by = first_sample_by(o, Clock::now());
+  while (!ctrl_c_pressed() && (o.count == 0 || seen < o.count)) {
+    auto entry = tail.next(std::chrono::milliseconds{200});
+    if (!entry) {
+      if (seen == 0 && Clock::now() >= first_by) return nothing_published(o);
+      continue;
     }
-    if (Clock::now() >= next_report) {
-      report();
-      next_report = Clock::now() + std::chrono::seconds{1};
-    }
+    ++seen;
+    const std::span<const std::byte> bytes{reinterpret_cast<const std::byte*>(entry->data.data()), entry->data.size()};
+    const auto id = prime::optimus::detail::entry_id(entry->id);
+    const auto sequence = id ? std::to_string(id->seq) : "null";
+    const auto stamp = entry->stamp ? std::to_string(entry->stamp->time_since_epoch().count()) : "null";
+    if (o.json)
+      std::cout << "{\"sequence\":" << sequence << ",\"stamp_ns\":" << stamp << ",\"size\":" << bytes.size()
+                << ",\"bytes\":" << quote(hex(bytes, bytes.size())) << "}" << std::endl;
+    else
+      std::cout << "sequence: " << (id ? sequence : "?") << "\nstamp: " << (entry->stamp ? stamp + " ns" : "?")
+                << "\nsize: " << bytes.size() << "\nbytes: " << hex(bytes) << "\n---" << std::endl;
   }
-  report();
   return seen > 0 ? int{kOk} : int{kNothing};
 }
 

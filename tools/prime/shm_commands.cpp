@@ -20,6 +20,7 @@
 #include "prime/shm.hpp"
 #include "stats.hpp"
 #include "table.hpp"
+#include "watch.hpp"
 
 namespace prime::tool {
 
@@ -56,12 +57,6 @@ std::string joined(const std::vector<std::uint32_t>& list) {
 }
 std::string pids(const std::vector<std::uint32_t>& list) { return list.empty() ? "-" : joined(list); }
 std::string json_pids(const std::vector<std::uint32_t>& list) { return "[" + joined(list) + "]"; }
-
-std::string fixed(double v, int digits = 3) {
-  std::ostringstream out;
-  out << std::fixed << std::setprecision(digits) << v;
-  return out.str();
-}
 
 shm::RegistrySnapshot snapshot_of(const std::string& domain) {
   auto seen = shm::inspect(domain);
@@ -123,44 +118,6 @@ struct Watch {
     return domain;
   }
 };
-
-// Reads samples until the duration, the count or Ctrl-C; `on_sample` gets
-// each, `report` runs every second and at the end. A second with nothing
-// new says so, instead of repeating figures about samples long gone (a
-// publisher that stopped).
-template <class OnSample, class Report>
-int watch_loop(const Options& o, Watch& w, OnSample on_sample, Report report) {
-  finish_on_ctrl_c();
-  const auto start = Clock::now();
-  const auto end = o.duration > 0 ? start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration))
-                                  : Clock::time_point::max();
-  auto next_report = start + 1s;
-  std::size_t seen = 0, reported = 0;
-  auto last_sample = start;
-  while (!ctrl_c_pressed() && Clock::now() < end && (o.count == 0 || seen < o.count)) {
-    auto sample = w.reader.read_for(std::min<Clock::duration>(100ms, end - Clock::now()));
-    const auto now = Clock::now();
-    if (sample) {
-      ++seen;
-      last_sample = now;
-      on_sample(*sample, now);
-    }
-    if (now >= next_report) {
-      if (seen > 0 && seen == reported) {
-        const auto idle = fixed(std::chrono::duration<double>(now - last_sample).count(), 1);
-        std::cout << (o.json ? "{\"topic\":" + quote(o.name) + ",\"no_new_samples_for_s\":" + idle + "}"
-                             : "no new samples for " + idle + " s")
-                  << std::endl;
-      } else {
-        report(false);
-      }
-      reported = seen;
-      next_report = now + 1s;
-    }
-  }
-  if (seen != reported) report(true);  // what came since the last report
-  return seen > 0 ? int{kOk} : int{kNothing};
-}
 
 }  // namespace
 
@@ -291,69 +248,13 @@ int shm_info(const Options& o) {
   throw Failure{{Errc::not_found, "no topic or service '" + o.name + "' in shm domain '" + o.domain + "'"}};
 }
 
-int shm_hz(const Options& o) {
-  Watch w{o, "hz"};
-  Window periods{o.window};
-  std::optional<Clock::time_point> last;
-  return watch_loop(
-      o, w,
-      [&](auto&, Clock::time_point now) {
-        if (last) periods.add(std::chrono::duration<double>(now - *last).count());
-        last = now;
-      },
-      [&](bool) {
-        if (periods.count() == 0) return;
-        const auto rate = 1 / periods.mean();
-        if (o.json)
-          std::cout << "{\"topic\":" << quote(o.name) << ",\"rate\":" << fixed(rate) << ",\"min\":" << fixed(periods.min(), 6)
-                    << ",\"max\":" << fixed(periods.max(), 6) << ",\"stddev\":" << fixed(periods.stddev(), 6)
-                    << ",\"window\":" << periods.count() << "}" << std::endl;
-        else
-          std::cout << "average rate: " << fixed(rate) << "\n\tmin: " << fixed(periods.min(), 6) << "s max: "
-                    << fixed(periods.max(), 6) << "s std dev: " << fixed(periods.stddev(), 6)
-                    << "s window: " << periods.count() << std::endl;
-      });
-}
-
-int shm_bw(const Options& o) {
-  Watch w{o, "bw"};
-  Window sizes{o.window};
-  Window times{o.window};
-  return watch_loop(
-      o, w,
-      [&](auto& sample, Clock::time_point now) {
-        sizes.add(static_cast<double>(sample.value.bytes().size()));
-        times.add(std::chrono::duration<double>(now.time_since_epoch()).count());
-      },
-      [&](bool) {
-        if (times.count() < 2) return;
-        const auto span = times.max() - times.min();
-        const auto rate = span > 0 ? sizes.mean() * static_cast<double>(times.count() - 1) / span : 0;
-        if (o.json)
-          std::cout << "{\"topic\":" << quote(o.name) << ",\"bytes_per_second\":" << fixed(rate, 1)
-                    << ",\"mean_size\":" << fixed(sizes.mean(), 1) << ",\"window\":" << times.count() << "}" << std::endl;
-        else
-          std::cout << "average: " << fixed(rate / 1024, 2) << " KiB/s\n\tmean size: " << fixed(sizes.mean(), 0)
-                    << " B min: " << sizes.min() << " B max: " << sizes.max() << " B window: " << times.count() << std::endl;
-      });
-}
-
-int shm_delay(const Options& o) {
-  Watch w{o, "delay"};
-  Window ages{o.window};
-  return watch_loop(
-      o, w, [&](auto& sample, Clock::time_point now) { ages.add(std::chrono::duration<double>(now - sample.stamp).count()); },
-      [&](bool) {
-        if (ages.count() == 0) return;
-        if (o.json)
-          std::cout << "{\"topic\":" << quote(o.name) << ",\"mean\":" << fixed(ages.mean(), 6) << ",\"p50\":"
-                    << fixed(ages.percentile(0.5), 6) << ",\"p99\":" << fixed(ages.percentile(0.99), 6)
-                    << ",\"max\":" << fixed(ages.max(), 6) << ",\"window\":" << ages.count() << "}" << std::endl;
-        else
-          std::cout << "average delay: " << fixed(ages.mean(), 6) << "s\n\tp50: " << fixed(ages.percentile(0.5), 6)
-                    << "s p99: " << fixed(ages.percentile(0.99), 6) << "s max: " << fixed(ages.max(), 6)
-                    << "s window: " << ages.count() << std::endl;
-      });
+int shm_watch(const Options& o, const std::string& command) {
+  Watch w{o, command};
+  return watch(o, command, [&](Clock::duration timeout) -> std::optional<Arrival> {
+    auto sample = w.reader.read_for(timeout);
+    if (!sample) return std::nullopt;
+    return Arrival{sample->value.bytes().size(), sample->stamp};
+  });
 }
 
 int shm_echo(const Options& o) {

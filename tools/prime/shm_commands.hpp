@@ -41,9 +41,7 @@ enum Exit : int { kOk = 0, kFailed = 1, kUsage = 2, kNotFound = 3, kNothing = 4,
 int shm_domains(const Options& o);
 int shm_ls(const Options& o);
 int shm_info(const Options& o);
-int shm_hz(const Options& o);
-int shm_bw(const Options& o);
-int shm_delay(const Options& o);
+int shm_watch(const Options& o, const std::string& command);  // hz, bw, delay (watch.hpp) on a topic
 int shm_echo(const Options& o);
 int shm_pub(const Options& o);
 int shm_call(const Options& o);

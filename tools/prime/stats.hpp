@@ -6,9 +6,19 @@
 #include <cmath>
 #include <cstddef>
 #include <deque>
+#include <iomanip>
+#include <sstream>
+#include <string>
 #include <vector>
 
 namespace prime::tool {
+
+// `v` with `digits` digits after the point.
+inline std::string fixed(double v, int digits = 3) {
+  std::ostringstream out;
+  out << std::fixed << std::setprecision(digits) << v;
+  return out.str();
+}
 
 // A window of the last `size` values.
 class Window {
