@@ -1043,6 +1043,32 @@ TEST(ShmDomain, AnEscapedNameReadsBackAndAnOddOneStaysAsItIs) {
   EXPECT_EQ(unescape("%+1x"), "%+1x");
 }
 
+// Two servers that start at once both find the segment of a server gone
+// for good, made for other limits, and each replaces it. The one that comes
+// second, having mapped the old segment before the first replaced it, must
+// not remove the new one (its server would serve a segment no client finds).
+TEST(ShmSegment, ASegmentReplacedMeanwhileIsNotRemovedByWhoeverFoundTheOldOne) {
+  const auto name = shm::detail::segment_name(unique_domain("replaced"), "service", "x");
+  const auto make = [&](std::byte value) {
+    return shm::detail::Segment::open(
+        name, 0600, 4096, "test segment", [](std::byte* data, std::size_t) { return data[0] != std::byte{0}; },
+        [&](std::byte* data, std::size_t) { data[0] = value; });
+  };
+  std::optional<shm::detail::Segment> old{make(std::byte{1})};
+  auto first = shm::detail::Segment::open_existing(name);   // each server maps what it finds
+  auto second = shm::detail::Segment::open_existing(name);
+  ASSERT_TRUE(first && second);
+  first->remove_name("test segment");
+  auto fresh = make(std::byte{2});
+  second->remove_name("test segment");  // late: what it found is gone already
+  EXPECT_TRUE(fresh.linked()) << "the new segment keeps its name";
+  auto found = shm::detail::Segment::open_existing(name);
+  ASSERT_TRUE(found);
+  EXPECT_EQ(found->data()[0], std::byte{2});
+  fresh.remove_name("test segment");
+  EXPECT_FALSE(shm::detail::Segment::open_existing(name));
+}
+
 TEST(ShmDomain, AParticipantStaysWhileAnythingItMadeLives) {
   const auto domain = unique_domain("outlive");
   shm::Core watcher{domain};

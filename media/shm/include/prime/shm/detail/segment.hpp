@@ -87,6 +87,18 @@ class Segment {
 
   static void remove(const std::string& name) noexcept { bip::shared_memory_object::remove(name.c_str()); }
 
+  // Removes this segment's name, if it still leads here, holding the
+  // segment's set-up lock: several openers that found it outdated remove it
+  // once, and none removes what another made in its place meanwhile.
+  void remove_name(const std::string& what) {
+    lock_byte(fd(), 0, what + " (being replaced)");
+    struct Unlock {
+      int fd;
+      ~Unlock() { unlock_byte(fd, 0); }
+    } unlock{fd()};
+    if (linked()) remove(name_);
+  }
+
   [[nodiscard]] std::byte* data() const noexcept { return static_cast<std::byte*>(region_.get_address()); }
   [[nodiscard]] std::size_t size() const noexcept { return region_.get_size(); }
   [[nodiscard]] const std::string& name() const noexcept { return name_; }

@@ -58,7 +58,7 @@ class Service {
         throw Failure{{Errc::in_use, what + " is served already by " + registry->describe(h.server.load())}};
       if (h.request_type == spec.request_type && h.reply_type == spec.reply_type && same_limits(service->geometry(), spec.qos))
         return service;
-      Segment::remove(segment_name);  // an earlier server's, for other types or limits: start afresh
+      service->segment_.remove_name(what);  // an earlier server's, for other types or limits: start afresh
     }
   }
 
