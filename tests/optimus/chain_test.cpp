@@ -189,6 +189,37 @@ TEST_F(OptimusChain, CallingAServiceNobodyServesIsPeerDeadNamingIt) {
   EXPECT_EQ(raw.integer({"LLEN", domain + ":svc:nobody"}), 0) << "the unanswered request was withdrawn";
 }
 
+// Destroying a core whose worker is busy ends the worker's wait for
+// requests without cutting it: a request the server handed out just before
+// is still answered, and the rest stay queued for another worker. Not one
+// is taken and lost (a cut wait lost the one on its way to the worker).
+// Each round stops the worker at a moment the test does not choose; most
+// moments fall while a wait is under way, the worker being busy.
+TEST_F(OptimusChain, StoppingABusyWorkerLosesNoRequestItWasHandedOut) {
+  RawRedis raw{shared_redis().url()};
+  const auto key = domain + ":svc:echo";
+  constexpr int kRequests = 300;
+  for (int round = 0; round < 10; ++round) {
+    const auto reply = [&](int i) { return domain + ":test-reply:" + std::to_string(round) + ":" + std::to_string(i); };
+    for (int i = 0; i < kRequests; ++i) {
+      std::string envelope;
+      optimus::detail::encode_request(static_cast<std::uint64_t>(i), reply(i), {}, 0, optimus::encode_message(i), envelope);
+      raw.command({"RPUSH", key, envelope});
+    }
+    {
+      optimus::Core core{options()};
+      (void)core.serve("echo", [](int x) { return x; });
+      ASSERT_TRUE(eventually([&] { return raw.integer({"LLEN", key}) < kRequests; }));  // at work
+    }
+    const auto queued = raw.integer({"LLEN", key});
+    long long answered = 0;
+    for (int i = 0; i < kRequests; ++i) answered += raw.integer({"LLEN", reply(i)});
+    EXPECT_EQ(answered + queued, kRequests) << "round " << round << ": " << answered << " answered, " << queued
+                                            << " still queued; the rest were taken and lost";
+    raw.command({"DEL", key});
+  }
+}
+
 // A linked call goes on from service to service without its caller: one
 // whose next service has no live worker says so to the caller at once,
 // rather than leaving the request where no one takes it until the call times out.

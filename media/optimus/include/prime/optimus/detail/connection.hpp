@@ -13,6 +13,7 @@
 #include <cstring>
 #include <ctime>
 #include <expected>
+#include <functional>
 #include <initializer_list>
 #include <memory>
 #include <mutex>
@@ -308,11 +309,15 @@ class Connection {
 
 // Lets a stop request end a blocking read on a connection at once, and only
 // a read: a write in progress (a reply on its way to a caller) is never cut.
+// With `wake` (a push to a key the read also waits on; false when it could
+// not be made), the read ends with that push, so what it took from the
+// server meanwhile still arrives; else, or when the push fails, the socket
+// is shut down, and what the read took is lost with it.
 // Lives no longer than the connection's lease.
 class StopGuard {
  public:
-  StopGuard(Connection& connection, std::stop_token stop)
-      : connection_{connection}, callback_{std::move(stop), Wake{this}} {}
+  StopGuard(Connection& connection, std::stop_token stop, std::function<bool()> wake = {})
+      : connection_{connection}, wake_{std::move(wake)}, callback_{std::move(stop), Wake{this}} {}
   StopGuard(const StopGuard&) = delete;
   StopGuard& operator=(const StopGuard&) = delete;
 
@@ -341,13 +346,22 @@ class StopGuard {
     void operator()() const noexcept {
       std::scoped_lock lock{guard->mutex_};
       guard->stopping_ = true;
+      if (guard->wake_ && pushed()) return;
       if (!guard->blocking_) return;
       guard->connection_.interrupt();
       guard->interrupted_ = true;
     }
+    [[nodiscard]] bool pushed() const noexcept {
+      try {
+        return guard->wake_();
+      } catch (...) {
+        return false;
+      }
+    }
   };
 
   Connection& connection_;
+  std::function<bool()> wake_;
   std::mutex mutex_;
   bool blocking_ = false;
   bool stopping_ = false;

@@ -72,13 +72,26 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
   };
   std::vector<std::vector<std::string>> outbox;  // commands to send with the next wait
   auto refused_backoff = kFirstRefusedBackoff;
+  // A key of this worker's own that it also waits on: a stop pushes to it,
+  // which ends the wait without cutting it, so a request the server handed
+  // out meanwhile still arrives, and is answered.
+  const auto wake = pool->key("wake:", pool->process_id() + ":" + std::to_string(pool->next_id()));
+  const auto push_wake = [&] {
+    auto lease = pool->acquire();
+    if (!lease) return false;
+    (*lease)->append({"RPUSH", wake, "stop"});
+    (*lease)->append({"PEXPIRE", wake, std::to_string((kWaitSlice + kSocketMargin).count())});
+    auto pushed = (*lease)->reply();
+    auto expires = (*lease)->reply();
+    return pushed && expires && !is_error(**pushed);
+  };
 
   while (!stop.stop_requested()) {
     bool refused = false;
     auto lease = pool->acquire_until(Clock::time_point::max(), stop);
     if (!lease) return;  // stopped
     auto& connection = **lease;
-    StopGuard guard{connection, stop};
+    StopGuard guard{connection, stop, push_wake};
     while (true) {
       std::size_t queued = 0;
       for (const auto& command : outbox) {
@@ -90,7 +103,7 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
       const bool stopping = guard.stopping();
       if (!stopping) {
         connection.set_timeout(kWaitSlice + kSocketMargin);
-        connection.append({"BLPOP", key, wait});
+        connection.append({"BLPOP", key, wake, wait});
       }
       if (!connection.flush()) break;
       bool ok = true;
@@ -103,14 +116,10 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
         if (is_error(**r)) report(server_error(**r, where + ": sending a result"));
       }
       if (!ok) break;
-      if (stopping) {
-        lease->discard();
-        return;
-      }
-      if (!guard.begin_blocking()) {
-        lease->discard();  // a BLPOP is under way on it
-        return;
-      }
+      if (stopping) return;  // nothing is under way on the connection: it goes back
+      // Read even when a stop came since the wait was sent: the push to the
+      // wake key (or, failing that, a shutdown) ends it at once.
+      (void)guard.begin_blocking();
       auto got = connection.reply();
       guard.end_blocking();
       if (!got) break;
@@ -121,6 +130,7 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
       }
       refused_backoff = kFirstRefusedBackoff;
       if (is_nil(**got) || (**got).type != REDIS_REPLY_ARRAY || (**got).elements != 2) continue;
+      if (text(*(**got).element[0]) == wake) continue;  // stopping: the loop's next turn ends it
 
       auto request = decode_request(text(*(**got).element[1]));
       if (!request) {
