@@ -212,7 +212,7 @@ int optimus_watch(const Options& o, const std::string& command) {
     return watch(o, command, [&](Clock::duration timeout) -> std::optional<Arrival> {
       auto entry = tail.next(timeout);
       if (!entry) return std::nullopt;
-      return Arrival{entry->data.size(), entry->stamp.value_or(Clock::now())};
+      return Arrival{entry->data.size(), entry->stamp};
     });
   finish_on_ctrl_c();
   std::size_t seen = 0;

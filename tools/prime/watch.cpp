@@ -29,8 +29,8 @@ class Figures {
     } else if (command_ == "bw") {
       values_.add(static_cast<double>(sample.size));
       times_.add(seconds(now.time_since_epoch()));
-    } else {
-      values_.add(seconds(now - sample.stamp));
+    } else if (sample.stamp) {
+      values_.add(seconds(now - *sample.stamp));
     }
   }
 

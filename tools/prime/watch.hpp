@@ -17,7 +17,7 @@ namespace prime::tool {
 // A sample as these commands see it.
 struct Arrival {
   std::size_t size = 0;
-  Clock::time_point stamp;  // its sensor's
+  std::optional<Clock::time_point> stamp{};  // its sensor's; none in a foreign one (delay passes it over)
 };
 
 // The next sample within `timeout`, or nothing.

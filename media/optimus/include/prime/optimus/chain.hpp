@@ -54,6 +54,9 @@ inline std::expected<std::string, Error> call_segment(const Segment& segment, st
       std::chrono::duration_cast<std::chrono::microseconds>(deadline - Clock::now()), std::chrono::hours{24});
   if (remaining.count() <= 0) return std::unexpected(Error{Errc::timeout, what() + ": the deadline passed before the call"});
 
+  // The message first: an envelope gives it a 32-bit length (kMaxEnvelope).
+  if (auto fits = connection.fits(payload.size(), [&] { return what() + ": a request"; }); !fits)
+    return std::unexpected(std::move(fits.error()));
   const auto id = segment.pool->next_id();
   const auto reply = reply_key(*segment.pool, id);
   std::string envelope;

@@ -72,7 +72,16 @@ inline std::vector<std::string> clean(const std::string& domain) {
   for (auto& removed : registry->remove_if_dead()) done.push_back("removed /dev/shm/" + removed);
   if (!done.empty()) return done;
   const auto before = registry->participants();
-  const auto freed = detail::reclaim(registry);
+  // Slots are cleared by a participant, whose lease tells the others it is
+  // at work: this tool joins the domain while it clears them.
+  std::shared_ptr<detail::Registry> member;
+  try {
+    member = detail::Registry::join(domain, registry->permissions(), "prime clean", true);
+  } catch (const Failure& f) {
+    if (f.error().code == Errc::not_found) return clean(domain);  // its last process exited meanwhile
+    throw;
+  }
+  const auto freed = detail::reclaim(member);
   for (const auto& p : before)
     if (!p.alive) done.push_back("forgot dead participant '" + p.name + "' (pid " + std::to_string(p.pid) + ")");
   if (freed > 0) done.push_back("freed " + std::to_string(freed) + " subscriber and client slots of dead participants");

@@ -23,7 +23,7 @@ struct Request {
   std::uint64_t id = 0;
   std::string reply_key;
   std::vector<std::string> route;   // services still to run after this one
-  std::int64_t deadline_ms = 0;     // system clock, ms since the epoch; the caller gives up then
+  std::int64_t deadline_ms = 0;     // the server's clock (Pool::server_ms); the caller gives up then; 0: never
   std::string payload;              // an encoded message (codec.hpp)
 };
 
@@ -40,10 +40,6 @@ struct StringAppender {
   std::string& out;
   void write(const char* data, std::size_t n) { out.append(data, n); }
 };
-
-inline std::int64_t system_ms(std::chrono::system_clock::time_point t) {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(t.time_since_epoch()).count();
-}
 
 inline void encode_request(std::uint64_t id, std::string_view reply_key, std::span<const std::string> route,
                            std::int64_t deadline_ms, std::string_view payload, std::string& out) {

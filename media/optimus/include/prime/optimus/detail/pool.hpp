@@ -208,19 +208,32 @@ class Pool : public std::enable_shared_from_this<Pool> {
   }
 
   // Asks the server for its clock (TIME) and keeps how far it is ahead of
-  // this machine's, taking the reply as read halfway through the round trip.
-  // A failed ask changes nothing: the connection says it broke when next used.
+  // this machine's, taking the reply as read halfway through the round
+  // trip: so off by at most half of it. A round trip more than twice the
+  // shortest seen (a server busy with a long command, this process
+  // descheduled) says little, and is kept only when no better one came for
+  // a minute (clocks drift). A failed ask changes nothing: the connection
+  // says it broke when next used. Bounded as a connect is, whatever the
+  // connection's last user waited for.
   void learn_clock(Connection& connection) {
-    const auto sent = system_ms_now();
+    if (!connection.set_timeout(std::chrono::duration_cast<std::chrono::microseconds>(options_.connect_timeout))) return;
+    const auto sent = std::chrono::system_clock::now();
     auto time = connection.command({"TIME"});
-    const auto received = system_ms_now();
+    const auto received = std::chrono::system_clock::now();
     if (!time || (*time)->type != REDIS_REPLY_ARRAY || (*time)->elements != 2) return;
     std::int64_t seconds = 0, micros = 0;
     const auto number = [](const redisReply* r, std::int64_t& out) {
       return r->str != nullptr && std::from_chars(r->str, r->str + r->len, out).ec == std::errc{};
     };
     if (!number((*time)->element[0], seconds) || !number((*time)->element[1], micros)) return;
-    server_ahead_ms_.store(seconds * 1000 + micros / 1000 - (sent + (received - sent) / 2), std::memory_order_relaxed);
+    const auto round_trip = received - sent;
+    const auto midway = std::chrono::duration_cast<std::chrono::microseconds>((sent + round_trip / 2).time_since_epoch());
+    std::scoped_lock lock{clock_mutex_};
+    const auto now = Clock::now();
+    if (round_trip > 2 * best_round_trip_ && now < clock_kept_until_) return;
+    best_round_trip_ = std::min(best_round_trip_, round_trip);
+    clock_kept_until_ = now + std::chrono::minutes{1};
+    server_ahead_ms_.store((seconds * 1'000'000 + micros - midway.count()) / 1000, std::memory_order_relaxed);
   }
 
   void give_back(Connection connection, std::uint64_t born) {
@@ -245,6 +258,9 @@ class Pool : public std::enable_shared_from_this<Pool> {
   Clock::time_point retry_after_{};
   Clock::time_point clock_due_{};  // when to measure the server's clock again
   std::atomic<std::int64_t> server_ahead_ms_{0};
+  std::mutex clock_mutex_;  // for the two below
+  std::chrono::system_clock::duration best_round_trip_ = std::chrono::system_clock::duration::max() / 4;
+  Clock::time_point clock_kept_until_{};  // a measure kept until then is replaced only by a good one
   Error last_error_{Errc::unreachable, ""};
   std::mutex calls_mutex_;
   std::condition_variable calls_done_;

@@ -141,6 +141,9 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
           pool->server_ms() > request->deadline_ms)
         continue;  // its caller has given up: running it would answer nobody
       auto result = run_block<In>(block, request->payload, where);
+      if (result)  // before it is wrapped: an envelope gives it a 32-bit length (kMaxEnvelope)
+        if (auto fits = connection.fits(result->size(), [&] { return where + ": its output"; }); !fits)
+          result = std::unexpected(std::move(fits.error()));
       // An answer nobody takes (its caller gave up) goes away by itself.
       const auto left = request->deadline_ms - pool->server_ms();
       const auto ttl = std::to_string(std::max<std::int64_t>(left, 0) + 10'000);

@@ -136,7 +136,9 @@ class StreamState {
   // `batch` is then in flight, and what is returned is the outcome of the
   // one before. If the server refused some of that one (a new epoch), this
   // one is answered too, and what both refused goes again, in order, as in
-  // publish_all. After an error nothing is in flight.
+  // publish_all. After an error nothing is in flight, but for a batch with
+  // a message longer than the server takes: that one is refused before it
+  // is sent, and the one before stays in flight.
   std::expected<void, Error> stream(InFlight& f, std::vector<Message> batch) {
     if (batch.empty()) return {};
     if (!f.lease) {

@@ -112,10 +112,12 @@ class Registry : public std::enable_shared_from_this<Registry> {
   // Takes a slot whose owner (the word `owner`) is dead, or died clearing
   // it, for this participant to clear: the word then names this one as
   // clearing it, until the clearer sets it to 0. False when the slot is
-  // free, its owner or clearer lives, or another took it first.
+  // free, its owner or clearer lives, or another took it first; and for a
+  // registry that only watches (no lease: others could not tell it from a
+  // dead clearer, and would clear the slot again under it).
   [[nodiscard]] bool take_to_clear(std::atomic<ParticipantId>& owner) const {
     auto id = owner.load();
-    if (id == 0 || alive(id & ~kReclaimingBit)) return false;
+    if (me_ == 0 || id == 0 || alive(id & ~kReclaimingBit)) return false;
     return owner.compare_exchange_strong(id, kReclaimingBit | me_);
   }
 
