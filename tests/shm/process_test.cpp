@@ -96,6 +96,15 @@ TEST(ShmProcesses, AFullPublisherKilledWithChunksTakenFromTheRingStrandsNone) {
   expect_a_publisher_killed_with_chunks_leaving_to_strand_none("full");
 }
 
+// Publishes sample 0 for `holder` (a peer subscribing to the topic, which
+// says so) and waits until it holds it.
+::testing::AssertionResult holds_the_first_sample(PeerProcess& holder, shm::Publisher<std::uint64_t>& publisher) {
+  if (!holder.says("subscribed")) return ::testing::AssertionFailure() << "the peer did not subscribe";
+  if (!publisher.publish(0)) return ::testing::AssertionFailure() << "sample 0 was not published";
+  if (!holder.says("holding")) return ::testing::AssertionFailure() << "the peer took no sample";
+  return ::testing::AssertionSuccess();
+}
+
 // `how`: the holder takes one view ("view") or a batch the cursor keeps ("views").
 void expect_a_killed_holder_not_to_stall_a_block_publisher(const std::string& how) {
   const auto domain = unique_domain("killed-subscriber-block");
@@ -104,9 +113,7 @@ void expect_a_killed_holder_not_to_stall_a_block_publisher(const std::string& ho
   auto publisher = core.publisher<std::uint64_t>("cmds", qos);
   auto live = core.subscribe<std::uint64_t>("cmds", {}, qos).subscribe();
   PeerProcess holder{{"hold", domain, "cmds", "4", "block", how}};
-  ASSERT_TRUE(holder.says("subscribed"));
-  ASSERT_TRUE(publisher.publish(0));
-  ASSERT_TRUE(holder.says("holding"));
+  ASSERT_TRUE(holds_the_first_sample(holder, publisher));
   holder.kill9();
 
   const auto start = std::chrono::steady_clock::now();
@@ -130,33 +137,32 @@ TEST(ShmProcesses, ASubscriberKilledWithABatchOutDoesNotStallABlockPublisher) {
   expect_a_killed_holder_not_to_stall_a_block_publisher("views");
 }
 
-TEST(ShmProcesses, ASubscriberKilledWhileHoldingASampleLeavesADropOldestPublisherUnaffected) {
-  const auto domain = unique_domain("killed-subscriber-drop");
+// A drop_oldest topic "scan" this process publishes, and a peer process
+// that subscribed, took sample 0, and was killed with -9 holding it.
+class ShmKilledHolder : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ASSERT_TRUE(holds_the_first_sample(holder, publisher));
+    holder.kill9();
+  }
+  const std::string domain = unique_domain("killed-holder");
   shm::Core core{domain};
-  auto publisher = core.publisher<std::uint64_t>("scan", {.capacity = 4});  // drop_oldest
+  shm::Publisher<std::uint64_t> publisher = core.publisher<std::uint64_t>("scan", {.capacity = 4});
   PeerProcess holder{{"hold", domain, "scan", "4", "drop", "view"}};
-  ASSERT_TRUE(holder.says("subscribed"));
-  ASSERT_TRUE(publisher.publish(0));
-  ASSERT_TRUE(holder.says("holding"));
-  holder.kill9();
+};
+
+TEST_F(ShmKilledHolder, LeavesADropOldestPublisherUnaffected) {
   for (std::uint64_t i = 1; i <= 10000; ++i) ASSERT_TRUE(publisher.publish(i)) << i;
   EXPECT_EQ(core.reclaim(), 1u) << "the dead subscriber's slot (and the sample it held) is reclaimed";
 }
 
-// A process killed while it cleared a dead subscriber's slot leaves the slot
-// naming it as the clearer, with some of the dead subscriber's holds still
-// set: the state written below (a clearer dies between two steps at any
-// time; no test can stop it there). A slot whose clearer lives is left to
-// it; one whose clearer died is cleared again by the next participant that
-// looks, and is not lost for as long as the topic lives.
-TEST(ShmProcesses, ASubscriberSlotWhoseClearerWasKilledIsClearedAgain) {
-  const auto domain = unique_domain("killed-clearer");
-  shm::Core core{domain};
-  auto publisher = core.publisher<std::uint64_t>("scan", {.capacity = 4});  // drop_oldest
-  PeerProcess holder{{"hold", domain, "scan", "4", "drop", "view"}};
-  ASSERT_TRUE(holder.says("subscribed"));
-  ASSERT_TRUE(publisher.publish(0));
-  ASSERT_TRUE(holder.says("holding"));
+// A process killed while it cleared the killed holder's slot leaves the
+// slot naming it as the clearer, with some of the holder's holds still set:
+// the state written below (a clearer dies between two steps at any time; no
+// test can stop it there). A slot whose clearer lives is left to it; one
+// whose clearer died is cleared again by the next participant that looks,
+// and is not lost for as long as the topic lives.
+TEST_F(ShmKilledHolder, WhoseSlotsClearerWasKilledTooIsClearedAgain) {
   const MappedTopic mapped{domain, "scan"};
   auto& h = mapped.header();
   std::size_t slot = 0;
@@ -169,7 +175,6 @@ TEST(ShmProcesses, ASubscriberSlotWhoseClearerWasKilledIsClearedAgain) {
     return n;
   };
   ASSERT_EQ(held_by_slot(), 1u);
-  holder.kill9();
 
   h.subscribers[slot].owner.store(shm::detail::kReclaimingBit | h.publisher.load());  // a live clearer: this process
   EXPECT_EQ(core.reclaim(), 0u) << "a slot a live participant clears is left to it";

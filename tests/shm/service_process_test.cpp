@@ -199,7 +199,7 @@ TEST(ShmServiceProcesses, ACallerKilledMidCallLeavesNothingStuck) {
   EXPECT_EQ(newcomer(7), 7) << "its slot serves a new client (max_clients 2)";
 }
 
-// As ShmProcesses.ASubscriberSlotWhoseClearerWasKilledIsClearedAgain, for a
+// As ShmKilledHolder.WhoseSlotsClearerWasKilledTooIsClearedAgain, for a
 // client slot: a caller killed, then the process clearing its slot killed
 // half way (the state written below). The slot is cleared again, and serves
 // a new client of a service that has room for one.
