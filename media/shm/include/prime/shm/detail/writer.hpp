@@ -60,6 +60,7 @@ class Writer {
     next_ = h.head.load();
     in_ring_.resize(g.capacity);
     batch_leaving_.resize(g.capacity + kLeavingMax);
+    holders_seen_.resize(g.capacity + kLeavingMax);
     for (std::uint64_t i = 0; i < g.capacity; ++i) {
       const auto entry = topic_->ring(i).load();
       in_ring_[i] = topic_->places().names_chunk(entry) ? RingEntry::chunk(entry) : kNoChunk;
@@ -192,7 +193,7 @@ class Writer {
     // One fence for the batch's evictions (evict), not a read-modify-write
     // per sample.
     fence_after_head(full);
-    for (std::size_t k = 0; k < leaving; ++k) evict(batch_leaving_[k], true);
+    evict_fenced(places, leaving);
     wake_subscribers();
     claim_ahead();
   }
@@ -360,6 +361,35 @@ class Writer {
       }
     }
     dropped.holders.fetch_and(~kPublisherBit, std::memory_order_acq_rel);
+  }
+
+  // evict(chunk, true) for each of the first `n` chunks of batch_leaving_:
+  // their holders all read first (relaxed), then one acquire fence for the
+  // reads, then each chunk kept as a spare or let go. Measured at 64 bytes,
+  // batches of 32, paired rounds against an acquire load per chunk: the
+  // publisher alone 1.05-1.16x, batches of views across processes
+  // 1.08-1.12x (rounds where the floor ran fast); acquire loads in a loop
+  // of their own gained nothing (0.96-1.09x, the publisher alone).
+  // ThreadSanitizer does not see fences (GCC says so: -Wtsan), so under it
+  // the loads acquire themselves: the same order, one it can check.
+  void evict_fenced(const Places& places, std::size_t n) noexcept {
+#if defined(__SANITIZE_THREAD__)
+    constexpr auto kRead = std::memory_order_acquire;
+#else
+    constexpr auto kRead = std::memory_order_relaxed;
+#endif
+    const auto* const leaving = batch_leaving_.data();
+    auto* const seen = holders_seen_.data();
+    for (std::size_t k = 0; k < n; ++k) seen[k] = places.chunk(leaving[k]).holders.load(kRead);
+    std::atomic_thread_fence(std::memory_order_acquire);
+    for (std::size_t k = 0; k < n; ++k) {
+      if (seen[k] == kPublisherBit && !spare_.full()) {
+        spare_.push(leaving[k]);
+        prefetch_for_write(places.payload(leaving[k]));
+      } else {
+        places.chunk(leaving[k]).holders.fetch_and(~kPublisherBit, std::memory_order_acq_rel);
+      }
+    }
   }
 
   // A chunk now held by this publisher: the spare one kept longest, else a free one.
@@ -563,6 +593,7 @@ class Writer {
   // A batch's (publish_some), and those leaving from before: room for a
   // batch as large as the ring and kLeavingMax more.
   std::vector<std::uint32_t> batch_leaving_;
+  std::vector<std::uint64_t> holders_seen_;  // their holders, as evict_fenced read them
   std::vector<std::uint32_t> in_ring_;  // the chunk each ring entry names, as this publisher wrote it
   std::uint64_t min_cursor_ = 0;    // the slowest subscriber's cursor when last looked at
   std::uint64_t out_ = 0;           // chunks loaned, not yet published or handed back
