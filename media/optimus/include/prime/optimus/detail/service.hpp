@@ -78,7 +78,7 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
   const auto wake = pool->key("wake:", pool->process_id() + ":" + std::to_string(pool->next_id()));
   const auto push_wake = [&] {
     auto lease = pool->acquire();
-    if (!lease) return false;
+    if (!lease || !(*lease)->set_timeout(std::chrono::microseconds{pool->options().connect_timeout})) return false;
     (*lease)->append({"RPUSH", wake, "stop"});
     (*lease)->append({"PEXPIRE", wake, std::to_string((kWaitSlice + kSocketMargin).count())});
     auto pushed = (*lease)->reply();

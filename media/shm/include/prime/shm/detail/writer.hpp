@@ -368,8 +368,8 @@ class Writer {
   // reads, then each chunk kept as a spare or let go. Measured at 64 bytes,
   // batches of 32, paired rounds against an acquire load per chunk: the
   // publisher alone 1.05-1.16x, batches of views across processes
-  // 1.08-1.12x (rounds where the floor ran fast); acquire loads in a loop
-  // of their own gained nothing (0.96-1.09x, the publisher alone).
+  // 1.00-1.16x, median 1.13x (rounds where the floor ran fast); acquire
+  // loads in a loop of their own gained nothing (the publisher alone).
   // ThreadSanitizer does not see fences (GCC says so: -Wtsan), so under it
   // the loads acquire themselves: the same order, one it can check.
   void evict_fenced(const Places& places, std::size_t n) noexcept {
