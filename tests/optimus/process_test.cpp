@@ -66,7 +66,17 @@ TEST_F(OptimusProcess, ServicesOnAMachineWhoseClockRunsAheadOfTheCallersAnswerIt
   GTEST_SKIP() << "faketime preloads a library, which a sanitizer's runtime does not let come first";
 #endif
   if (std::system("command -v faketime > /dev/null") != 0) GTEST_SKIP() << "faketime is not installed (tools/run installs it)";
+  // faketime keeps its state in two files of /dev/shm named by its pid,
+  // which it leaves behind when the helper is stopped: removed after it.
+  struct FaketimeFiles {
+    pid_t pid = 0;
+    ~FaketimeFiles() {
+      for (const auto* stem : {"/dev/shm/faketime_shm_", "/dev/shm/sem.faketime_sem_"})
+        if (pid > 0) ::unlink((stem + std::to_string(pid)).c_str());
+    }
+  } leftovers;
   auto services = helper({"serve"}, {"faketime", "-f", "+30s"});
+  leftovers.pid = services.pid();
   optimus::Core core{options()};
   auto twice = core.service<int, int>("double", {.timeout = 1000ms});
   EXPECT_EQ(twice(21), 42);
