@@ -118,7 +118,7 @@ TEST_F(ServiceTest, ADamagedServiceFailsItsCallsByNameAndToolsPassItOver) {
   auto planner = client.chain<Pose, Path>("planner");
   const auto value = planner.call({1, 1});
   ASSERT_FALSE(value);
-  EXPECT_EQ(value.error().code, Errc::type_mismatch);
+  EXPECT_EQ(value.error().code, Errc::damaged);
   EXPECT_NE(value.error().message.find("service 'planner': its shared memory is damaged (1000 cells"), std::string::npos)
       << value.error().describe();
   EXPECT_FALSE(listed(client, "planner"));

@@ -378,11 +378,11 @@ TEST_F(ShmTest, ADamagedTopicIsRefusedByNameAndPassedOverByTools) {
   auto damaged = core.publisher<int>("damaged");
   MappedTopic{core.domain(), "damaged"}.header().capacity = 0;
   shm::Core other{core.domain()};  // with no mapping of its own yet
-  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("damaged"); }, Errc::type_mismatch,
+  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("damaged"); }, Errc::damaged,
                          "topic 'damaged': its shared memory is damaged (a capacity of 0)"));
-  EXPECT_TRUE(fails_with([&] { (void)other.observe("damaged"); }, Errc::type_mismatch, "a capacity of 0"));
+  EXPECT_TRUE(fails_with([&] { (void)other.observe("damaged"); }, Errc::damaged, "a capacity of 0"));
   MappedTopic{core.domain(), "damaged"}.header().capacity = 1ull << 20;  // more chunks than the segment holds
-  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("damaged"); }, Errc::type_mismatch,
+  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("damaged"); }, Errc::damaged,
                          "does not follow from its capacity"));
   const auto seen = shm::inspect(core.domain());
   ASSERT_TRUE(seen);
@@ -406,7 +406,7 @@ TEST_F(ShmTest, ATopicOfAnotherLayoutIsRefusedByVersion) {
                              ", this one reads " + std::to_string(layout) + ")"));
   MappedTopic{core.domain(), "old"}.header().layout = layout;
   MappedTopic{core.domain(), "old"}.header().chunk_stride -= shm::detail::kPayloadAlignment;
-  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("old"); }, Errc::type_mismatch,
+  EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("old"); }, Errc::damaged,
                          "does not follow from its capacity"));
 }
 
@@ -861,7 +861,7 @@ TEST_F(ShmTest, SequencesGoOnAcrossTheRingsTwoToTheFortiethWrap) {
   // A topic whose first sequence lies just short of the wrap: publish, read
   // and overwrite across it.
   const shm::TopicQos qos{.capacity = 4, .max_message_size = sizeof(std::uint64_t), .max_subscribers = 8, .max_held = 8};
-  auto registry = shm::detail::Registry::join(unique_domain("wrap"), 0600, "test");
+  auto registry = shm::detail::Registry::join(unique_domain("wrap"), {}, "test");
   auto topic = shm::detail::Topic::open(registry, "wrapping", Fingerprint::of<std::uint64_t>(), qos, "u64", kWrap - 6);
   shm::Publisher<std::uint64_t> publisher{topic, 1s, shm::PublishFence::full, {}};
   shm::SubscriptionReader<std::uint64_t> reader{topic, {}, {}};
@@ -1051,7 +1051,7 @@ TEST(ShmSegment, ASegmentReplacedMeanwhileIsNotRemovedByWhoeverFoundTheOldOne) {
   const auto name = shm::detail::segment_name(unique_domain("replaced"), "service", "x");
   const auto make = [&](std::byte value) {
     return shm::detail::Segment::open(
-        name, 0600, 4096, "test segment", [](std::byte* data, std::size_t) { return data[0] != std::byte{0}; },
+        name, {}, 4096, "test segment", [](std::byte* data, std::size_t) { return data[0] != std::byte{0}; },
         [&](std::byte* data, std::size_t) { data[0] = value; });
   };
   std::optional<shm::detail::Segment> old{make(std::byte{1})};

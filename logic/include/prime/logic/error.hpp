@@ -23,6 +23,7 @@ enum class Errc {
   qos_mismatch,    // an endpoint exists with other QoS than this side asks for
   no_space,        // memory for an endpoint could not be reserved (a full /dev/shm)
   not_found,       // no endpoint of that name exists (a service nobody serves)
+  damaged,         // bytes another process left (shared memory, a Redis entry) break their own bounds
 };
 
 constexpr std::string_view to_string(Errc code) noexcept {
@@ -40,6 +41,7 @@ constexpr std::string_view to_string(Errc code) noexcept {
     case Errc::qos_mismatch: return "QoS mismatch";
     case Errc::no_space: return "no space";
     case Errc::not_found: return "not found";
+    case Errc::damaged: return "damaged";
   }
   return "unknown";
 }

@@ -13,7 +13,10 @@ namespace prime {
 
 // Text of at most N characters stored inline, so a message that holds it
 // stays trivially copyable and can live in shared memory or travel as bytes.
-// Always NUL-terminated.
+// Its accessors never reach past N, whatever count the bytes hold: a message
+// another process wrote (in shared memory, through Redis) is read as safely
+// as one made here. There is no c_str(): text of another process need not
+// end in a NUL; view() and str() know where it ends.
 template <std::size_t N>
 class bounded_string {
   static_assert(N > 0 && N < UINT32_MAX, "bounded_string: capacity must be in [1, 2^32)");
@@ -37,10 +40,14 @@ class bounded_string {
     data_[size_] = '\0';
   }
 
-  [[nodiscard]] constexpr std::string_view view() const noexcept { return {data_, size_}; }
-  [[nodiscard]] constexpr const char* c_str() const noexcept { return data_; }
-  [[nodiscard]] constexpr std::size_t size() const noexcept { return size_; }
-  [[nodiscard]] constexpr bool empty() const noexcept { return size_ == 0; }
+  [[nodiscard]] constexpr std::string_view view() const noexcept { return {data_, size()}; }
+  // The count the bytes hold, within N.
+  [[nodiscard]] constexpr std::size_t size() const noexcept { return size_ < N ? size_ : N; }
+  [[nodiscard]] constexpr bool empty() const noexcept { return size() == 0; }
+  // Whether the count the bytes hold is one this type could have written
+  // (at most N, the text ending in a NUL): false for a damaged or forged
+  // message, which the accessors still read within N.
+  [[nodiscard]] constexpr bool valid() const noexcept { return size_ <= N && data_[size_] == '\0'; }
   [[nodiscard]] static constexpr std::size_t capacity() noexcept { return N; }
   // Where the count and the characters lie: for tools that read the bytes
   // of a message whose type they never saw (prime::schema_of).

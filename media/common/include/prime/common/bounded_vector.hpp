@@ -15,7 +15,10 @@
 namespace prime {
 
 // Up to N values of T stored inline, so a message that holds it stays
-// trivially copyable and can live in shared memory or travel as bytes.
+// trivially copyable and can live in shared memory or travel as bytes. Its
+// accessors never reach past N, whatever count the bytes hold: a message
+// another process wrote (in shared memory, through Redis) is read as safely
+// as one made here.
 template <class T, std::size_t N>
 class bounded_vector {
   static_assert(std::is_trivially_copyable_v<T>, "bounded_vector: T must be trivially copyable");
@@ -45,20 +48,26 @@ class bounded_vector {
     if (!try_push_back(value)) throw overflow(size_ + 1);
   }
   [[nodiscard]] constexpr bool try_push_back(const T& value) noexcept {
-    if (size_ == N) return false;
-    items_[size_++] = value;
+    if (size() == N) return false;
+    items_[size()] = value;
+    size_ = size() + 1;
     return true;
   }
   // Throws Failure{limit_exceeded} when n > N. New values are value-initialised.
   constexpr void resize(std::size_t n) {
     if (n > N) throw overflow(n);
-    for (auto i = size_; i < n; ++i) items_[i] = T{};
+    for (auto i = size(); i < n; ++i) items_[i] = T{};
     size_ = n;
   }
   constexpr void clear() noexcept { size_ = 0; }
 
-  [[nodiscard]] constexpr std::size_t size() const noexcept { return size_; }
-  [[nodiscard]] constexpr bool empty() const noexcept { return size_ == 0; }
+  // The count the bytes hold, within N.
+  [[nodiscard]] constexpr std::size_t size() const noexcept { return size_ < N ? size_ : N; }
+  [[nodiscard]] constexpr bool empty() const noexcept { return size() == 0; }
+  // Whether the count the bytes hold is one this type could have written
+  // (at most N): false for a damaged or forged message, which the
+  // accessors still read within N.
+  [[nodiscard]] constexpr bool valid() const noexcept { return size_ <= N; }
   [[nodiscard]] static constexpr std::size_t capacity() noexcept { return N; }
   // Where the count and the values lie: for tools that read the bytes of a
   // message whose type they never saw (prime::schema_of).
@@ -66,14 +75,15 @@ class bounded_vector {
   [[nodiscard]] static constexpr std::size_t data_offset() noexcept { return offsetof(bounded_vector, items_); }
   [[nodiscard]] constexpr T* data() noexcept { return items_.data(); }
   [[nodiscard]] constexpr const T* data() const noexcept { return items_.data(); }
+  // Unchecked, as std::vector's: i < size() is the caller's.
   [[nodiscard]] constexpr T& operator[](std::size_t i) noexcept { return items_[i]; }
   [[nodiscard]] constexpr const T& operator[](std::size_t i) const noexcept { return items_[i]; }
   [[nodiscard]] constexpr iterator begin() noexcept { return data(); }
-  [[nodiscard]] constexpr iterator end() noexcept { return data() + size_; }
+  [[nodiscard]] constexpr iterator end() noexcept { return data() + size(); }
   [[nodiscard]] constexpr const_iterator begin() const noexcept { return data(); }
-  [[nodiscard]] constexpr const_iterator end() const noexcept { return data() + size_; }
-  [[nodiscard]] constexpr std::span<T> span() noexcept { return {data(), size_}; }
-  [[nodiscard]] constexpr std::span<const T> span() const noexcept { return {data(), size_}; }
+  [[nodiscard]] constexpr const_iterator end() const noexcept { return data() + size(); }
+  [[nodiscard]] constexpr std::span<T> span() noexcept { return {data(), size()}; }
+  [[nodiscard]] constexpr std::span<const T> span() const noexcept { return {data(), size()}; }
 
   friend constexpr bool operator==(const bounded_vector& a, const bounded_vector& b) {
     return std::equal(a.begin(), a.end(), b.begin(), b.end());

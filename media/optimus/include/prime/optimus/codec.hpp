@@ -99,15 +99,13 @@ struct BytesCodec {
     std::array<char, sizeof(T)> bytes;
     std::memcpy(bytes.data(), body.data(), sizeof(T));
     T value = std::bit_cast<T>(bytes);
-    // Bounded types (bounded_string, bounded_vector) say how much of their
-    // storage is in use; a count past the capacity would read out of bounds.
-    if constexpr (requires { value.size(); T::capacity(); }) {
-      if (value.size() > T::capacity())
-        return std::unexpected("a size of " + std::to_string(value.size()) + " past the capacity " +
-                               std::to_string(T::capacity()));
-      if constexpr (requires { value.c_str(); }) {
-        if (value.c_str()[value.size()] != '\0') return std::unexpected(std::string{"text that is not NUL-terminated"});
-      }
+    // A bounded type (bounded_string, bounded_vector) with a count it could
+    // not have written is refused. Those nested in a message are read within
+    // their capacity by their own accessors, whatever count they carry.
+    if constexpr (requires { value.valid(); T::capacity(); }) {
+      if (!value.valid())
+        return std::unexpected("a bounded value's count past the capacity " + std::to_string(T::capacity()) +
+                               " (or its text not ended by a NUL)");
     }
     return value;
   }

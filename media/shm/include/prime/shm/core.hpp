@@ -40,15 +40,10 @@ inline TopicQos complete(const std::string& name, const Fingerprint& type, bool 
   auto refuse = [&](const std::string& why) { throw Failure{{Errc::limit_exceeded, "topic '" + name + "': " + why}}; };
   if (raw && qos.max_message_size == 0) refuse("a raw byte topic needs max_message_size");
   if (qos.max_message_size == 0) qos.max_message_size = type.size;
-  if (qos.capacity == 0) refuse("capacity must be at least 1");
-  if (qos.max_held == 0) refuse("max_held must be at least 1");
-  if (qos.max_subscribers == 0 || qos.max_subscribers > kMaxSubscribers)
-    refuse("max_subscribers must be in [1, " + std::to_string(kMaxSubscribers) + "], not " +
-           std::to_string(qos.max_subscribers));
   if (qos.max_message_size < type.size)
     refuse("max_message_size " + std::to_string(qos.max_message_size) + " is smaller than " + type.describe());
   const TopicGeometry geometry{qos.capacity, qos.max_message_size, qos.max_subscribers, qos.max_held};
-  if (geometry.chunk_count() >= kNoChunk) refuse("capacity and subscribers need more than 2^24 slots");
+  if (const auto what = geometry.out_of_bounds(); !what.empty()) refuse("QoS out of bounds: " + what);
   return qos;
 }
 
@@ -65,10 +60,8 @@ inline ServiceQos complete(const std::string& name, const Fingerprint& request, 
   if (qos.max_reply_size < reply.size) refuse("max_reply_size is smaller than " + reply.describe());
   if (qos.workers == 0 || qos.workers > kMaxWorkers)
     refuse("workers must be in [1, " + std::to_string(kMaxWorkers) + "], not " + std::to_string(qos.workers));
-  if (qos.max_clients == 0 || qos.max_clients > kMaxServiceClients)
-    refuse("max_clients must be in [1, " + std::to_string(kMaxServiceClients) + "], not " + std::to_string(qos.max_clients));
-  if (qos.calls_per_client == 0 || qos.max_clients * qos.calls_per_client > kMaxCells)
-    refuse("max_clients × calls_per_client must be in [1, " + std::to_string(kMaxCells) + "]");
+  const ServiceGeometry geometry{qos.max_request_size, qos.max_reply_size, qos.max_clients, qos.calls_per_client};
+  if (const auto what = geometry.out_of_bounds(); !what.empty()) refuse("QoS out of bounds: " + what);
   if (qos.timeout <= std::chrono::milliseconds::zero()) refuse("the timeout must be positive");
   return qos;
 }
@@ -111,7 +104,8 @@ class Core : public ErasedChainRuntime {
  public:
   explicit Core(std::string domain, DomainOptions options = {})
       : ErasedChainRuntime{"shm"},
-        registry_{detail::Registry::join(domain, options.permissions,
+        registry_{detail::Registry::join(domain,
+                                         {.permissions = options.permissions, .owner = options.owner.value_or(::geteuid())},
                                          options.participant.empty() ? program_name() : options.participant,
                                          options.only_if_alive)} {
     reclaim();
@@ -199,6 +193,7 @@ class Core : public ErasedChainRuntime {
         if (!reply.empty()) std::memcpy(out, reply.data(), reply.size());
         return reply.size();
       } else {
+        if (sizeof(Reply) > capacity) throw reply_too_large(sizeof(Reply), capacity);
         ::new (out) Reply(std::invoke(block, detail::Wire<Request>::view(request, size)));  // made where the caller reads it
         return sizeof(Reply);
       }
@@ -220,6 +215,7 @@ class Core : public ErasedChainRuntime {
         if (n > capacity) throw reply_too_large(n, capacity);
         return n;
       } else {
+        if (sizeof(Out) > capacity) throw reply_too_large(sizeof(Out), capacity);
         auto* reply = ::new (out) Out;
         std::invoke(block, detail::Wire<In>::view(request, size), *reply);
         return sizeof(Out);

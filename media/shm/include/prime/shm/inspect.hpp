@@ -76,7 +76,7 @@ inline std::vector<std::string> clean(const std::string& domain) {
   // at work: this tool joins the domain while it clears them.
   std::shared_ptr<detail::Registry> member;
   try {
-    member = detail::Registry::join(domain, registry->permissions(), "prime clean", true);
+    member = detail::Registry::join(domain, registry->access(), "prime clean", true);
   } catch (const Failure& f) {
     if (f.error().code == Errc::not_found) return clean(domain);  // its last process exited meanwhile
     throw;

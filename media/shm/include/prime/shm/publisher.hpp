@@ -187,7 +187,8 @@ class Publisher {
  public:
   Publisher(std::shared_ptr<detail::Topic> topic, std::chrono::milliseconds block_timeout, PublishFence fence,
             std::function<void(Error)> report)
-      : owner_{std::make_shared<detail::LoaningWriter>(std::move(topic), block_timeout, fence == PublishFence::light,
+      : owner_{std::make_shared<detail::LoaningWriter>(std::move(topic), saturating_cast<std::chrono::nanoseconds>(block_timeout),
+                                                       fence == PublishFence::light,
                                                        std::move(report))} {}
   Publisher(Publisher&&) noexcept = default;
   Publisher& operator=(Publisher&& other) noexcept {

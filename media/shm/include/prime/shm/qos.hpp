@@ -2,7 +2,10 @@
 
 #include <chrono>
 #include <cstddef>
+#include <optional>
 #include <string>
+
+#include <sys/types.h>
 
 #include "prime/topology/qos.hpp"
 
@@ -106,7 +109,14 @@ struct ClientQos {
 // How a process joins a domain.
 struct DomainOptions {
   // Who may open the domain's segments: the creating user only by default.
+  // A segment found with a permission bit beyond these is refused.
   unsigned permissions = 0600;
+  // Whose segments are accepted: this process's effective user by default.
+  // A domain shared by several users (permissions 0660, say) names the one
+  // who makes its segments. A segment of anyone else is refused, naming
+  // the file and its owner: another user could otherwise make a domain's
+  // files first and map what its participants then write.
+  std::optional<uid_t> owner{};
   // How this participant is listed in the registry; empty: the program's name.
   std::string participant{};
   // Join only a domain some live participant is in (Errc::not_found

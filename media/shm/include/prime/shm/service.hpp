@@ -28,15 +28,21 @@ template <class T>
 struct Wire {
   using argument = T;
   using value = T;
-  static std::size_t write(const T& v, std::byte* to, std::size_t) {
-    ::new (to) T(v);
+  static std::size_t write(const T& v, std::byte* to, std::size_t capacity) {
+    ::new (&place_at(to, capacity)) T(v);
     return sizeof(T);
   }
   static T read(const std::byte* from, std::size_t) { return view(from, 0); }
   // The message where it lies.
   static const T& view(const std::byte* at, std::size_t) { return *std::launder(reinterpret_cast<const T*>(at)); }
-  // Where a request or reply is written in place.
-  static T& place_at(std::byte* at, std::size_t) { return *::new (at) T; }
+  // Where a request or reply is written in place, in a cell with room for
+  // `capacity` bytes.
+  static T& place_at(std::byte* at, std::size_t capacity) {
+    if (sizeof(T) > capacity)
+      throw Failure{{Errc::limit_exceeded, "a request of " + std::to_string(sizeof(T)) + " bytes exceeds the " +
+                                               std::to_string(capacity) + " bytes the service's cell has (max_request_size)"}};
+    return *::new (at) T;
+  }
 };
 template <>
 struct Wire<Bytes> {
@@ -142,9 +148,16 @@ class ServiceChain {
 static_assert(Chain<ServiceChain<int, double>>);
 
 // Linking two service chains forwards: the first one's output is written
-// straight into the second one's cell by the first service's worker.
+// straight into the second one's cell by the first service's worker. The
+// first one's reply type must be the second one's request type (raw chains
+// of tools carry the types their services have): Errc::type_mismatch.
 template <Message A, Message B, Message C>
 [[nodiscard]] ServiceChain<A, C> link(const ServiceChain<A, B>& first, const ServiceChain<B, C>& second) {
+  const auto& out = first.route().back();
+  const auto& in = second.route().front();
+  if (!(out->reply() == in->request()))
+    throw Failure{{Errc::type_mismatch, "cannot link service '" + out->name() + "', which gives " + out->reply().describe() +
+                                            ", to service '" + in->name() + "', which takes " + in->request().describe()}};
   auto route = first.route();
   route.insert(route.end(), second.route().begin(), second.route().end());
   if (route.size() > detail::kMaxHops)

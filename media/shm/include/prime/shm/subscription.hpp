@@ -44,21 +44,19 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
         runtime_{std::move(runtime)},
         feed_{std::move(feed)} {}
 
+  // Damage found in the ring (Errc::damaged) goes to core.errors(): the
+  // sample it names is passed over.
   std::optional<Sample<View<T>>> try_read() override {
-    if (subscriber_->at_budget()) {
-      report_budget();
-      return std::nullopt;
-    }
-    auto taken = subscriber_->cursor().try_take();
-    if (!taken) return std::nullopt;
-    budget_reported_ = false;
-    return sample(View<T>{subscriber_.get(), *taken});
+    auto taken = take();
+    if (auto damage = subscriber_->cursor().take_damage()) report(std::move(*damage));
+    return taken;
   }
 
   std::expected<Sample<View<T>>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
     while (true) {  // a sample overwritten between the wait and the take sends it back to waiting
       if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
-      if (auto sample = try_read()) return std::move(*sample);
+      if (auto sample = take()) return std::move(*sample);
+      if (auto damage = subscriber_->cursor().take_damage()) return std::unexpected(std::move(*damage));
     }
   }
 
@@ -81,6 +79,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
         budget_reported_ = false;
         return n;
       }
+      if (auto damage = subscriber_->cursor().take_damage()) return std::unexpected(std::move(*damage));
     }
   }
 
@@ -91,6 +90,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     while (true) {
       if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
       if (auto views = take_views(max); !views.empty()) return views;
+      if (auto damage = subscriber_->cursor().take_damage()) return std::unexpected(std::move(*damage));
     }
   }
   // What is published now, up to `max`: an empty batch when nothing is (or
@@ -100,7 +100,9 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       report_budget();
       return {};
     }
-    return take_views(max);
+    auto views = take_views(max);
+    if (auto damage = subscriber_->cursor().take_damage()) report(std::move(*damage));
+    return views;
   }
 
   // The newest sample, skipping what is older. At its budget the reader
@@ -123,6 +125,17 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   [[nodiscard]] std::uint64_t lost() const override { return subscriber_->cursor().lost(); }
 
  private:
+  std::optional<Sample<View<T>>> take() {
+    if (subscriber_->at_budget()) {
+      report_budget();
+      return std::nullopt;
+    }
+    auto taken = subscriber_->cursor().try_take();
+    if (!taken) return std::nullopt;
+    budget_reported_ = false;
+    return sample(View<T>{subscriber_.get(), *taken});
+  }
+
   Views<T> take_views(std::size_t max) {
     const auto room = subscriber_->max_held() - std::min(subscriber_->held(), subscriber_->max_held());
     const auto index = subscriber_->cursor().take_batch(std::min(max, room), subscriber_->held());
@@ -140,8 +153,10 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   void report_budget() {
     if (budget_reported_) return;
     budget_reported_ = true;
-    if (auto runtime = runtime_.lock())
-      runtime->report({Errc::limit_exceeded, budget_message() + " (it reads on once one is released)"});
+    report({Errc::limit_exceeded, budget_message() + " (it reads on once one is released)"});
+  }
+  void report(Error error) {
+    if (auto runtime = runtime_.lock()) runtime->report(std::move(error));
   }
   std::string budget_message() const {
     return "topic '" + subscriber_->topic().name() + "': a reader holds its max_held of " +

@@ -40,13 +40,15 @@ class Binding {
 
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
   [[nodiscard]] const ClientQos& qos() const noexcept { return qos_; }
+  [[nodiscard]] const Fingerprint& request() const noexcept { return request_; }
+  [[nodiscard]] const Fingerprint& reply() const noexcept { return reply_; }
 
   // The service with a live server and this client's slot in it, waiting
   // for one up to ClientQos::wait_for_service; or why not.
   std::expected<std::shared_ptr<Service>, Error> ready(Clock::time_point now) {
     auto bound = bind(now);
     if (bound || bound.error().code != Errc::not_found || qos_.wait_for_service <= Clock::duration::zero()) return bound;
-    const auto give_up = now + qos_.wait_for_service;
+    const auto give_up = deadline_after(qos_.wait_for_service, now);
     auto pause = std::chrono::microseconds{100};
     while (true) {
       bound = bind(Clock::now());
@@ -63,7 +65,8 @@ class Binding {
     const auto now = at.time_since_epoch().count();
     auto& slot = h.clients[slot_];
     const auto gap = h.min_interval_ns.load(std::memory_order_relaxed);
-    if (gap > 0 && slot.last_request.load() != 0 && now - slot.last_request.load() < gap)
+    const auto last = slot.last_request.load();
+    if (gap > 0 && last != 0 && last <= now && now - last < gap)
       return limit(service, "a client sends at most one request every " + std::to_string(gap / 1000) +
                                 " us (min_interval)");
     if (const auto depth = h.queue_depth.load(); depth > 0 && service.queued() >= depth)
@@ -109,6 +112,11 @@ class Binding {
         return std::unexpected(Error{Errc::type_mismatch, "service '" + name_ + "' takes " + h.request_type.describe() +
                                                               " and gives " + h.reply_type.describe() + ", not " +
                                                               request_.describe() + " and " + reply_.describe()});
+      if (const auto& g = found->geometry(); g.max_request_size < request_.size || g.max_reply_size < reply_.size)
+        return std::unexpected(Error{Errc::damaged, "service '" + name_ + "': its shared memory is damaged (cells of " +
+                                                        std::to_string(g.max_request_size) + "-byte requests and " +
+                                                        std::to_string(g.max_reply_size) + "-byte replies for " +
+                                                        request_.describe() + " and " + reply_.describe() + ")"});
       if (auto taken = take_slot(*found); !taken) return std::unexpected(std::move(taken.error()));
       service_ = std::move(found);
     }
@@ -226,11 +234,11 @@ inline std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding
   // The call's deadline: the client's timeout, or the longest its services
   // allow (a server sets its limits just after it takes the service: one
   // found with none yet allows the default).
-  auto timeout = std::chrono::nanoseconds{route.front()->qos().timeout};
+  auto timeout = saturating_cast<std::chrono::nanoseconds>(route.front()->qos().timeout);
   if (timeout == std::chrono::nanoseconds::zero())
     for (auto& h : held) timeout = std::max(timeout, std::chrono::nanoseconds{h.service->header().timeout_ns.load()});
   if (timeout == std::chrono::nanoseconds::zero()) timeout = ServiceQos{}.timeout;
-  const auto deadline = now + timeout;
+  const auto deadline = deadline_after(timeout, now);
 
   auto& first = held.front();
   auto& c = first.service->cell(first.cell);

@@ -8,6 +8,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "prime/logic/error.hpp"
@@ -153,10 +154,12 @@ class Cursor {
   [[nodiscard]] std::uint64_t bit() const noexcept { return bit_; }
 
   // The next sample, if one is published and unread. Looks at one ring
-  // entry (one cache line) when none is.
+  // entry (one cache line) when none is. Bounded: a ring whose entries
+  // name samples no publisher wrote (damage, see take_damage) ends the
+  // look, as does a publisher lapping this reader on every look.
   std::optional<Taken> try_take() {
     retire_ended();
-    while (true) {
+    for (std::uint64_t look = 0; look <= max_looks(); ++look) {
       const auto entry = topic_->ring(next_).load(std::memory_order_acquire);
       const auto ahead = RingEntry::ahead(entry, next_);
       if (ahead < 0) {
@@ -182,8 +185,9 @@ class Cursor {
         }
         chunk.holders.fetch_and(~bit_);
       }
-      skip_overwritten();
+      if (!skip_overwritten()) return std::nullopt;
     }
+    return std::nullopt;
   }
 
   // Up to `max` samples as a batch (see TakenBatch): its index, for
@@ -201,7 +205,11 @@ class Cursor {
     b.info.reserve(max);
     free_.pop_back();  // before anything retires more
     const auto places = topic_->places();
-    while (true) {
+    for (std::uint64_t look = 0;; ++look) {
+      if (look > max_looks()) {  // bounded, as try_take
+        free_.push_back(index);
+        return std::nullopt;
+      }
       // Each sample's size and stamp are read beside the ring: before the
       // look at `lagging` that decides whether the cursor keeps the batch,
       // and before a hold's check (SampleInfo says why those orders).
@@ -227,8 +235,9 @@ class Cursor {
         b.info.push_back(*info);
       }
       if (b.chunks.empty()) {
-        skip_overwritten();
-        continue;
+        if (skip_overwritten()) continue;
+        free_.push_back(index);
+        return std::nullopt;
       }
       if (may_keep) keep_within_reach(next_ + b.chunks.size(), held);
       b.held = !covers(next_);  // after the ring entries' and infos' loads, and kept_end's store
@@ -244,7 +253,10 @@ class Cursor {
         }
       }
       if (!b.chunks.empty()) break;
-      skip_overwritten();
+      if (!skip_overwritten()) {
+        free_.push_back(index);
+        return std::nullopt;
+      }
     }
     b.first = next_;
     b.pinned = false;
@@ -373,6 +385,11 @@ class Cursor {
 
   [[nodiscard]] std::uint64_t lost() const noexcept { return lost_; }
 
+  // Damage a take found since the last call (Errc::damaged): a ring entry
+  // naming a sample no publisher could have written. The take passed over
+  // it, as over a sample lost; the reader reports it.
+  [[nodiscard]] std::optional<Error> take_damage() noexcept { return std::exchange(damage_, std::nullopt); }
+
  private:
   static constexpr std::size_t kNone = ~std::size_t{0};
 
@@ -380,13 +397,39 @@ class Cursor {
     lost_ += seq - next_;
     advance(seq);
   }
-  // The next sample was overwritten before it was taken: lost to us. Skip
-  // to the oldest still in the ring.
-  void skip_overwritten() {
+  // The next sample was not there to take: overwritten before it was
+  // taken (lost to us), or its ring entry is damaged. Skips to the oldest
+  // still in the ring, never past the head: false when there is nothing to
+  // skip to (a publish half-way, or an entry naming a sample the head says
+  // is not out), so a ring of forged entries is never walked on and on.
+  //
+  // A publisher stores a batch's entries (at most a ring's worth) before
+  // the head that counts them, so an entry the head has not reached is at
+  // most capacity - 1 past it, and one a lap or more ahead of the reader is
+  // whole laps ahead. Any other entry is damage, reported once per take.
+  bool skip_overwritten() {
+    const auto entry = topic_->ring(next_).load(std::memory_order_acquire);
     const auto head = topic_->header().head.load(std::memory_order_acquire);
     const auto capacity = topic_->geometry().capacity;
-    skip_to(std::max(next_ + 1, head > capacity ? head - capacity : 0));
+    const auto ahead = RingEntry::ahead(entry, next_);
+    const auto seq = next_ + static_cast<std::uint64_t>(ahead);
+    if ((ahead == 0 && RingEntry::chunk(entry) != kNoChunk && !topic_->places().names_chunk(entry)) ||
+        (ahead > 0 && (static_cast<std::uint64_t>(ahead) % capacity != 0 || seq >= head + capacity)))
+      note_damage(entry, ahead, head);
+    const auto to = std::max(next_ + 1, head > capacity ? head - capacity : 0);
+    if (to > head) return false;
+    skip_to(to);
+    return true;
   }
+  void note_damage(std::uint64_t entry, std::int64_t ahead, std::uint64_t head) {
+    if (damage_) return;
+    damage_ = Error{Errc::damaged, "topic '" + topic_->name() + "': its shared memory is damaged (the ring entry for sample " +
+                                       std::to_string(next_) + " names sample " + std::to_string(next_ + ahead) +
+                                       " in chunk " + std::to_string(RingEntry::chunk(entry)) + ", with " +
+                                       std::to_string(head) + " published); passed over"};
+  }
+  // Looks one take makes at most: a lap of the ring, and one more.
+  [[nodiscard]] std::uint64_t max_looks() const noexcept { return topic_->geometry().capacity + 1; }
 
   // Whether a batch from `seq` is kept by the cursor: on a `block` topic,
   // from where it covers samples, while the publisher waits for this
@@ -567,6 +610,7 @@ class Cursor {
   // `block` publisher at most that much of the ring.
   std::uint64_t ack_every_ = 1;
   std::uint64_t lost_ = 0;
+  std::optional<Error> damage_;
   // Sleeps in the current window, and whether this subscriber asked for
   // full fences (for good once membarrier was refused).
   static constexpr auto kWindow = std::chrono::milliseconds{100};

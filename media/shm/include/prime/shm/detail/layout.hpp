@@ -207,6 +207,12 @@ static_assert(offsetof(TopicHeader, publisher) % 64 == 0 && offsetof(TopicHeader
 
 inline constexpr std::size_t round_up(std::size_t n, std::size_t to) { return (n + to - 1) / to * to; }
 
+// Bounds on what a segment's geometry may multiply: a message, and a
+// segment, far larger than any /dev/shm, yet small enough that no sum or
+// product of them wraps around.
+inline constexpr std::uint64_t kMaxMessageSize = 1ull << 40;  // exclusive
+inline constexpr std::uint64_t kMaxSegmentBytes = 1ull << 46;
+
 // Copies a type's description where it fits; one that does not is recorded
 // as its size only (tools then show bytes).
 template <std::size_t N>
@@ -247,23 +253,35 @@ struct TopicGeometry {
     return round_up(kPayloadOffset + max_message_size, kChunkAlignment);
   }
   [[nodiscard]] constexpr std::size_t bytes() const { return chunks_offset() + chunk_count() * chunk_stride(); }
+
+  // Which of its values is out of bounds, when one is; empty when none is.
+  // Each is bounded before any is multiplied, so no size computed from
+  // them wraps around: both when a topic is made (QoS) and when a segment
+  // is mapped (whatever its header says).
+  [[nodiscard]] std::string out_of_bounds() const {
+    if (capacity == 0) return "a capacity of 0";
+    if (max_subscribers == 0 || max_subscribers > kMaxSubscribers)
+      return std::to_string(max_subscribers) + " subscriber slots, not in [1, " + std::to_string(kMaxSubscribers) + "]";
+    if (max_held == 0) return "max_held 0";
+    if (capacity >= kNoChunk || max_held >= kNoChunk || max_message_size >= kMaxMessageSize)
+      return "a capacity of " + std::to_string(capacity) + ", messages of " + std::to_string(max_message_size) +
+             " bytes and max_held " + std::to_string(max_held) + " (each below 2^24, messages below 2^40 bytes)";
+    if (chunk_count() >= kNoChunk) return std::to_string(chunk_count()) + " chunks, more than a ring entry can name";
+    if (chunk_count() > kMaxSegmentBytes / chunk_stride())
+      return std::to_string(chunk_count()) + " chunks of " + std::to_string(chunk_stride()) +
+             " bytes, more than a segment may be (2^46 bytes)";
+    return {};
+  }
 };
 
 // What is wrong with geometry `g`, read from header `h`, against the segment
 // `h` heads, which is `size` bytes long; empty when nothing is. A process
 // addresses the segment by `g`: one written by a foreign or broken program
-// must not send it out of the segment (or divide by zero). What else `h`
-// records of its layout must follow from `g`.
+// must not send it out of the segment (or divide by zero), nor have it
+// size its own state past what the segment holds. What else `h` records of
+// its layout must follow from `g`.
 inline std::string damage(const TopicHeader& h, const TopicGeometry& g, std::size_t size) {
-  if (g.capacity == 0) return "a capacity of 0";
-  if (g.max_subscribers > kMaxSubscribers)
-    return std::to_string(g.max_subscribers) + " subscriber slots, more than " + std::to_string(kMaxSubscribers);
-  // Each bounded before the geometry multiplies them: a size can then not wrap around.
-  constexpr std::uint64_t kBound = 1ull << 40;
-  if (g.capacity >= kBound || g.max_message_size >= kBound || g.max_held >= (1u << 24))
-    return "a capacity of " + std::to_string(g.capacity) + ", messages of " + std::to_string(g.max_message_size) +
-           " bytes and max_held " + std::to_string(g.max_held);
-  if (g.chunk_count() >= kNoChunk) return std::to_string(g.chunk_count()) + " chunks, more than a ring entry can name";
+  if (auto what = g.out_of_bounds(); !what.empty()) return what;
   if (h.chunk_count != g.chunk_count() || h.chunk_stride != g.chunk_stride() || h.ring_offset != g.ring_offset() ||
       h.info_offset != g.info_offset() || h.chunks_offset != g.chunks_offset())
     return "a layout that does not follow from its capacity, message size and subscriber slots";

@@ -74,29 +74,34 @@ class Registry : public std::enable_shared_from_this<Registry> {
   // Joins `domain` as `name`. When no participant of an earlier run is alive,
   // that run's topics are removed first; or, `only_if_alive` (a tool that
   // works on a running system), nothing is touched and joining fails.
-  static std::shared_ptr<Registry> join(const std::string& domain, unsigned permissions, const std::string& name,
+  static std::shared_ptr<Registry> join(const std::string& domain, const Access& access, const std::string& name,
                                         bool only_if_alive = false) {
     if (domain.empty()) throw Failure{{Errc::limit_exceeded, "shm: a domain needs a name"}};
+    if ((access.permissions & ~0666u) != 0)
+      throw Failure{{Errc::limit_exceeded, "shm domain '" + domain + "': permissions are read and write bits (at most 0666)"}};
     while (true) {
-      auto registry = std::shared_ptr<Registry>{new Registry{domain, permissions}};
+      auto registry = std::shared_ptr<Registry>{new Registry{domain, access}};
       if (registry->enter(name, only_if_alive)) return registry;
     }
   }
   // The registry of `domain` seen from outside, joining nothing (no lease,
-  // no slot): for tools. Null when the domain does not exist.
+  // no slot): for tools. Null when the domain does not exist. Its
+  // segments are taken from this user alone, with the registry's mode.
   static std::shared_ptr<Registry> watch(const std::string& domain) {
     auto segment = Segment::open_existing(segment_name(domain, "registry", ""));
     if (!segment || segment->size() < sizeof(RegistryLayout)) return nullptr;
     const auto* r = std::launder(reinterpret_cast<const RegistryLayout*>(segment->data()));
     if (r->magic.load(std::memory_order_acquire) != kRegistryMagic) return nullptr;
-    return std::shared_ptr<Registry>{new Registry{domain, std::move(*segment)}};
+    struct stat st {};
+    const unsigned mode = ::fstat(segment->fd(), &st) == 0 ? st.st_mode & 0666 : 0600;
+    return std::shared_ptr<Registry>{new Registry{domain, {.permissions = mode}, std::move(*segment)}};
   }
   Registry(const Registry&) = delete;
   Registry& operator=(const Registry&) = delete;
   ~Registry() { leave(); }
 
   [[nodiscard]] const std::string& domain() const noexcept { return domain_; }
-  [[nodiscard]] unsigned permissions() const noexcept { return permissions_; }
+  [[nodiscard]] const Access& access() const noexcept { return access_; }
   [[nodiscard]] ParticipantId me() const noexcept { return me_; }
 
   // Whether the participant `id` still lives: it is still in its slot, and
@@ -210,9 +215,8 @@ class Registry : public std::enable_shared_from_this<Registry> {
     for (auto& e : r.endpoints)
       if (e.used) removed.push_back(segment_name(domain_, kind_name(e.kind), read_text(e.name)));
     for (auto& e : r.endpoints) forget(e);
-    r.magic.store(0);
     removed.push_back(segment_.name());
-    Segment::remove(segment_.name());
+    remove_registry();
     return removed;
   }
 
@@ -228,20 +232,20 @@ class Registry : public std::enable_shared_from_this<Registry> {
   }
 
  private:
-  Registry(std::string domain, unsigned permissions)
+  Registry(std::string domain, const Access& access)
       : domain_{std::move(domain)},
-        permissions_{permissions},
+        access_{access},
         pid_namespace_{own_pid_namespace()},
         segment_{Segment::open(
-            segment_name(domain_, "registry", ""), permissions_, sizeof(RegistryLayout), "shm domain '" + domain_ + "'",
+            segment_name(domain_, "registry", ""), access_, sizeof(RegistryLayout), "shm domain '" + domain_ + "'",
             [this](std::byte* data, std::size_t size) { return is_set_up(data, size); },
             [](std::byte* data, std::size_t) {
               auto* r = ::new (data) RegistryLayout{};
               r->magic.store(kRegistryMagic, std::memory_order_release);
             })} {}
 
-  Registry(std::string domain, Segment segment)
-      : domain_{std::move(domain)}, permissions_{0600}, pid_namespace_{own_pid_namespace()}, segment_{std::move(segment)} {}
+  Registry(std::string domain, const Access& access, Segment segment)
+      : domain_{std::move(domain)}, access_{access}, pid_namespace_{own_pid_namespace()}, segment_{std::move(segment)} {}
 
   bool is_set_up(std::byte* data, std::size_t size) const {
     if (size < sizeof(std::uint64_t)) return false;
@@ -257,14 +261,13 @@ class Registry : public std::enable_shared_from_this<Registry> {
   bool enter(const std::string& name, bool only_if_alive) {
     Locked lock{*this};
     auto& r = layout();
-    if (r.magic.load() != kRegistryMagic) return false;
+    // Removed meanwhile (its last participant left): a registry no other
+    // participant could find, whatever its magic says.
+    if (r.magic.load() != kRegistryMagic || !segment_.linked()) return false;
     const bool anyone_alive = std::any_of(std::begin(r.participants), std::end(r.participants),
                                           [this](const auto& p) { return alive(p.id.load()); });
     if (!anyone_alive && only_if_alive) {
-      if (r.generation.load() == 0) {  // made by this join just now: nobody's, so it goes again
-        r.magic.store(0);
-        Segment::remove(segment_.name());
-      }
+      if (r.generation.load() == 0) remove_registry();  // made by this join just now: nobody's, so it goes again
       throw Failure{{Errc::not_found, "shm domain '" + domain_ +
                                           "' has no live participant (every process in it has exited); what they "
                                           "left stays as it is: 'prime ls' shows it, 'prime clean' removes it"}};
@@ -277,7 +280,8 @@ class Registry : public std::enable_shared_from_this<Registry> {
       if (!try_lock_byte(segment_.fd(), lease_byte(i))) continue;  // a live participant's
       auto& p = r.participants[i];
       me_ = ((r.generation.fetch_add(1) + 1) << kSlotBits) | (i + 1);
-      p.pid = static_cast<std::uint32_t>(::getpid());
+      pid_ = ::getpid();
+      p.pid = static_cast<std::uint32_t>(pid_);
       p.pid_namespace = pid_namespace_;
       copy_name(p.name, name);
       p.id.store(me_);
@@ -287,8 +291,12 @@ class Registry : public std::enable_shared_from_this<Registry> {
                                              std::to_string(kMaxParticipants) + " participants"}};
   }
 
+  // Leaves the domain. Not in a child forked after joining: it shares this
+  // participant's lease (the lock belongs to the open file description both
+  // have), and unlocking it there would have the parent, alive, taken for
+  // dead and its slots cleared under it.
   void leave() noexcept {
-    if (me_ == 0) return;
+    if (me_ == 0 || ::getpid() != pid_) return;
     try {
       Locked lock{*this};
       auto& r = layout();
@@ -300,12 +308,20 @@ class Registry : public std::enable_shared_from_this<Registry> {
                                             [this](const auto& p) { return alive(p.id.load()); });
       if (!anyone_alive) {
         for (auto& e : r.endpoints) forget(e);
-        r.magic.store(0);
-        Segment::remove(segment_.name());
+        remove_registry();
       }
     } catch (...) {
       // The lease goes with the descriptor: others see this participant gone.
     }
+  }
+
+  // Removes the registry (its table lock held): its name first, then its
+  // magic, so a participant killed between the two leaves nothing behind,
+  // not a registry no tool sees; one that opened it before the removal
+  // finds the name gone, or the magic (enter).
+  void remove_registry() {
+    Segment::remove(segment_.name());
+    layout().magic.store(0);
   }
 
   // The table lock: one thread of this process (the mutex) and one
@@ -345,11 +361,12 @@ class Registry : public std::enable_shared_from_this<Registry> {
   }
 
   std::string domain_;
-  unsigned permissions_;
+  Access access_;
   std::uint64_t pid_namespace_;
   mutable std::mutex mutex_;
   Segment segment_;
   ParticipantId me_ = 0;
+  pid_t pid_ = 0;  // the process that joined
 };
 
 }  // namespace prime::shm::detail

@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fcntl.h>
+#include <limits>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -36,6 +37,37 @@ inline constexpr const char* kShmDirectory = "/dev/shm";
   return static_cast<std::uint64_t>(fs.f_bavail) * fs.f_frsize;
 }
 
+// Whose segments a participant accepts, and what its own may allow: a
+// segment is taken only from `owner`, with no permission bit beyond
+// `permissions`. Another user of the machine who made a domain's files
+// first (before its participants came) would otherwise have them set up
+// and used in files that user maps read-write.
+struct Access {
+  unsigned permissions = 0600;
+  uid_t owner = ::geteuid();
+};
+
+// What is wrong with the file open at `fd` for `access`
+// (empty when nothing is): it must be a regular file of the owner, with no
+// permission bit beyond those asked for. `mode_too`: false for one opened
+// only to look at, whose asked-for mode is not known.
+inline std::string untrusted(int fd, const Access& access, bool mode_too = true) {
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) return "cannot stat it (" + std::string{std::strerror(errno)} + ")";
+  char mode[16];
+  std::snprintf(mode, sizeof mode, "%04o", static_cast<unsigned>(st.st_mode & 07777));
+  if (!S_ISREG(st.st_mode)) return "it is not a regular file";
+  if (st.st_uid != access.owner)
+    return "it belongs to uid " + std::to_string(st.st_uid) + ", not to uid " + std::to_string(access.owner) +
+           " (the owner this participant accepts: DomainOptions::owner)";
+  if (mode_too && (st.st_mode & 07777 & ~access.permissions) != 0) {
+    char asked[16];
+    std::snprintf(asked, sizeof asked, "%04o", access.permissions);
+    return std::string{"its mode "} + mode + " allows more than the " + asked + " asked for (DomainOptions::permissions)";
+  }
+  return {};
+}
+
 // One named POSIX shared-memory segment, mapped read-write into this process
 // for as long as the object lives, with its descriptor kept open (the
 // registry's liveness locks live on it). Boost.Interprocess opens, maps and
@@ -46,14 +78,17 @@ class Segment {
   // set-up lock (a lock on its byte 0, dropped by the kernel if the holder
   // dies) while it looks: when `is_ready(data, size)` says the contents are
   // not set up (it is new, or its creator died half-way), this opener sizes
-  // it to `size`, reserving every byte now (posix_fallocate: a full
-  // /dev/shm is an error here, never a SIGBUS later), and calls
-  // `set_up(data, size)`. Errors name `what`.
+  // it to at least `size` (never smaller: others may map it), reserving
+  // every byte now (posix_fallocate: a full /dev/shm is an error here,
+  // never a SIGBUS later), and calls `set_up(data, size)`. A segment not
+  // made as `access` allows is refused (Errc::unreachable). Errors name
+  // `what`.
   template <class IsReady, class SetUp>
-  static Segment open(const std::string& name, unsigned permissions, std::size_t size, const std::string& what,
+  static Segment open(const std::string& name, const Access& access, std::size_t size, const std::string& what,
                       IsReady&& is_ready, SetUp&& set_up) {
     while (true) {
-      Segment segment{name, open_object(name, permissions, what)};
+      Segment segment{name, open_object(name, access.permissions, what)};
+      segment.check(access, what, true);
       lock_byte(segment.fd(), 0, what + " (being set up)");
       struct Unlock {
         int fd;
@@ -72,10 +107,13 @@ class Segment {
   }
 
   // Maps the existing segment `name`, or nothing when there is none (or it
-  // is still empty). For inspection: it takes no lock.
-  static std::optional<Segment> open_existing(const std::string& name) {
+  // is still empty). For inspection: it takes no lock. One not made as
+  // `access` allows is refused (Errc::unreachable); with no access given,
+  // only its owner is checked (this process's effective user).
+  static std::optional<Segment> open_existing(const std::string& name, const std::optional<Access>& access = {}) {
     try {
       Segment segment{name, bip::shared_memory_object{bip::open_only, name.c_str(), bip::read_write}};
+      segment.check(access.value_or(Access{}), "shared memory '" + name + "'", access.has_value());
       if (segment.file_size() == 0) return std::nullopt;
       segment.map();
       return segment;
@@ -125,16 +163,26 @@ class Segment {
     }
   }
 
+  void check(const Access& access, const std::string& what, bool mode_too) const {
+    if (const auto why = untrusted(fd(), access, mode_too); !why.empty())
+      throw Failure{{Errc::unreachable, what + ": refused " + kShmDirectory + "/" + name_ + ": " + why}};
+  }
+
   [[nodiscard]] std::size_t file_size() const {
     struct stat st {};
     return ::fstat(fd(), &st) == 0 ? static_cast<std::size_t>(st.st_size) : 0;
   }
 
+  // Grows the file to `size` and reserves its blocks; never shrinks it: a
+  // segment whose header reads as not set up (its creator died half-way,
+  // or another program zeroed it) may be mapped by live participants, and
+  // cutting pages out from under them would kill each with SIGBUS.
   void reserve(std::size_t size, const std::string& what) {
     region_ = bip::mapped_region{};
     const auto free = shm_bytes_free() + file_size();  // what it has already counts as free to it
-    int error = ::ftruncate(fd(), static_cast<off_t>(size)) == 0 ? 0 : errno;
-    if (error == 0) error = ::posix_fallocate(fd(), 0, static_cast<off_t>(size));
+    const int error = size > static_cast<std::size_t>(std::numeric_limits<off_t>::max())
+                          ? EFBIG
+                          : ::posix_fallocate(fd(), 0, static_cast<off_t>(size));  // grows it, never shrinks
     if (error == 0) return;
     remove(name_);  // nobody uses a segment that was never set up
     const bool full = error == ENOSPC || error == EFBIG || error == ENOMEM;

@@ -47,8 +47,8 @@ class Server {
     }
     h.workers.store(static_cast<std::uint32_t>(qos.workers));
     h.queue_depth.store(qos.queue_depth);
-    h.min_interval_ns.store(std::chrono::nanoseconds{qos.min_interval}.count());
-    h.timeout_ns.store(std::chrono::nanoseconds{qos.timeout}.count());
+    h.min_interval_ns.store(saturating_cast<std::chrono::nanoseconds>(qos.min_interval).count());
+    h.timeout_ns.store(saturating_cast<std::chrono::nanoseconds>(qos.timeout).count());
     h.requests.forget(~0ull);  // an earlier server's workers may have died asleep
     recover();
   }
@@ -134,7 +134,7 @@ class Server {
     const std::uint32_t hops = c.next_hops;
     if (hops >= kMaxHops) {
       h.failed.fetch_add(1);
-      const Error damaged{Errc::type_mismatch, "service '" + service_->name() + "': a call's cell is damaged (" +
+      const Error damaged{Errc::damaged, "service '" + service_->name() + "': a call's cell is damaged (" +
                                                    std::to_string(hops) + " services after this one, at most " +
                                                    std::to_string(kMaxHops - 1) + ")"};
       return answer(i, ticket, &damaged);
@@ -159,6 +159,12 @@ class Server {
     std::optional<Error> error;
     std::size_t size = 0;
     try {
+      // The next service of a linked call may have come back for other
+      // types since the call was linked: its cell is not this reply's.
+      if (next && !(next->header().request_type == service_->header().reply_type))
+        throw Failure{{Errc::type_mismatch, "the next service, '" + next->name() + "', takes " +
+                                                next->header().request_type.describe() + ", not this one's reply, " +
+                                                service_->header().reply_type.describe()}};
       size = handler_(service_->request(i), service_->request_size(c), out, capacity);
     } catch (const Failure& f) {
       error = f.error();
@@ -282,16 +288,21 @@ class Server {
   // names now, if that is still the one the hop's caller held a cell in.
   Service* following(const Hop& hop) {
     std::scoped_lock lock{mutex_};
-    auto& known = next_[hop.service];
-    if (!known || !known->current()) {
+    // Kept only for entries the registry names: a hop is read from shared
+    // memory, and the map must not grow with every value a caller writes.
+    auto found = next_.find(hop.service);
+    if (found == next_.end() || !found->second || !found->second->current()) {
       const auto name = service_->registry().name_at(hop.service, EndpointKind::service);
       if (!name) return nullptr;
+      std::shared_ptr<Service> opened;
       try {
-        known = Service::open_existing(service_->registry_handle(), *name);
+        opened = Service::open_existing(service_->registry_handle(), *name);
       } catch (const Failure&) {
         return nullptr;  // damaged: as if it were gone
       }
+      found = next_.insert_or_assign(hop.service, std::move(opened)).first;
     }
+    const auto& known = found->second;
     if (!known || known->header().incarnation != hop.incarnation) return nullptr;  // made anew since: that cell is gone
     return known.get();
   }

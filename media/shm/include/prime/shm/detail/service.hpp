@@ -49,7 +49,7 @@ class Service {
                                    spec.qos.calls_per_client};
     while (true) {
       auto segment = Segment::open(
-          segment_name, registry->permissions(), geometry.bytes(), what,
+          segment_name, registry->access(), geometry.bytes(), what,
           [&](std::byte* data, std::size_t size) { return is_set_up(name, data, size); },
           [&](std::byte* data, std::size_t) { set_up(data, spec, geometry); });
       auto service = std::shared_ptr<Service>{new Service{registry, name, index, std::move(segment)}};
@@ -63,9 +63,9 @@ class Service {
   }
 
   // For a client: the service `name` as it is, or null when there is none.
-  // Throws Failure (Errc::type_mismatch) when its header is damaged.
+  // Throws Failure (Errc::damaged) when its header is damaged.
   static std::shared_ptr<Service> open_existing(std::shared_ptr<Registry> registry, const std::string& name) {
-    auto segment = Segment::open_existing(segment_name(registry->domain(), "service", name));
+    auto segment = Segment::open_existing(segment_name(registry->domain(), "service", name), registry->access());
     if (!segment || segment->size() < sizeof(ServiceHeader)) return nullptr;
     const auto* h = std::launder(reinterpret_cast<const ServiceHeader*>(segment->data()));
     if (h->magic.load(std::memory_order_acquire) != kServiceMagic || h->layout != kServiceLayout) return nullptr;
@@ -208,7 +208,7 @@ class Service {
   static ServiceGeometry checked_geometry(const std::string& name, const ServiceHeader& header, std::size_t size) {
     const auto geometry = ServiceGeometry::of(header);
     if (const auto what = damage(header, geometry, size); !what.empty())
-      throw Failure{{Errc::type_mismatch, "service '" + name + "': its shared memory is damaged (" + what + ")"}};
+      throw Failure{{Errc::damaged, "service '" + name + "': its shared memory is damaged (" + what + ")"}};
     return geometry;
   }
 

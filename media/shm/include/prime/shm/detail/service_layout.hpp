@@ -150,20 +150,30 @@ struct ServiceGeometry {
   [[nodiscard]] constexpr std::size_t cell_stride() const { return round_up(tail_offset() + sizeof(CellTail), 64); }
   [[nodiscard]] constexpr std::size_t cells_offset() const { return round_up(sizeof(ServiceHeader), 64); }
   [[nodiscard]] constexpr std::size_t bytes() const { return cells_offset() + cell_count() * cell_stride(); }
+
+  // Which of its values is out of bounds, when one is (as a topic's:
+  // TopicGeometry::out_of_bounds); empty when none is.
+  [[nodiscard]] std::string out_of_bounds() const {
+    if (max_clients == 0 || max_clients > kMaxServiceClients)
+      return std::to_string(max_clients) + " client slots, not in [1, " + std::to_string(kMaxServiceClients) + "]";
+    if (calls_per_client == 0 || calls_per_client > kMaxCells || cell_count() > kMaxCells)
+      return std::to_string(max_clients) + " clients of " + std::to_string(calls_per_client) + " calls, not in [1, " +
+             std::to_string(kMaxCells) + "] cells";
+    if (max_request_size >= kMaxMessageSize || max_reply_size >= kMaxMessageSize)
+      return "requests of " + std::to_string(max_request_size) + " bytes and replies of " + std::to_string(max_reply_size) +
+             " (each below 2^40 bytes)";
+    return {};
+  }
 };
 
 // What is wrong with geometry `g`, read from header `h`, against the
 // `size`-byte segment `h` heads; empty when nothing is (as for a topic's:
 // see damage(TopicHeader, TopicGeometry)).
 inline std::string damage(const ServiceHeader& h, const ServiceGeometry& g, std::size_t size) {
-  if (g.max_clients > kMaxServiceClients)
-    return std::to_string(g.max_clients) + " client slots, more than " + std::to_string(kMaxServiceClients);
-  if (g.calls_per_client > kMaxCells || g.cell_count() > kMaxCells || h.cell_count != g.cell_count())
+  if (auto what = g.out_of_bounds(); !what.empty()) return what;
+  if (h.cell_count != g.cell_count())
     return std::to_string(h.cell_count) + " cells for " + std::to_string(g.max_clients) + " clients of " +
-           std::to_string(g.calls_per_client) + " calls (at most " + std::to_string(kMaxCells) + ")";
-  constexpr std::uint64_t kBound = 1ull << 40;  // before the geometry adds them: no size wraps around
-  if (g.max_request_size >= kBound || g.max_reply_size >= kBound)
-    return "requests of " + std::to_string(g.max_request_size) + " bytes, replies of " + std::to_string(g.max_reply_size);
+           std::to_string(g.calls_per_client) + " calls";
   if (h.cell_stride != g.cell_stride() || h.request_offset != g.request_offset() || h.reply_offset != g.reply_offset() ||
       h.tail_offset != g.tail_offset() || h.cells_offset != g.cells_offset())
     return "a layout that does not follow from its message sizes and cells";

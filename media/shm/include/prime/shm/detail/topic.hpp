@@ -74,7 +74,7 @@ class Topic {
     const auto what = "topic '" + name + "'";
     registry->add(EndpointKind::topic, name);
     auto segment = Segment::open(
-        segment_name(registry->domain(), "topic", name), registry->permissions(), geometry.bytes(), what,
+        segment_name(registry->domain(), "topic", name), registry->access(), geometry.bytes(), what,
         [&](std::byte* data, std::size_t size) { return is_set_up(name, data, size); },
         [&](std::byte* data, std::size_t) { set_up(data, type, qos, geometry, schema, first_sequence); });
     auto topic = std::shared_ptr<Topic>{new Topic{std::move(registry), name, std::move(segment)}};
@@ -85,9 +85,9 @@ class Topic {
 
   // The topic `name` as it is, whatever its type, or null when it does not
   // exist (or is not set up yet): for inspection. Throws Failure
-  // (Errc::type_mismatch) when its header is damaged.
+  // (Errc::damaged) when its header is damaged.
   static std::shared_ptr<Topic> inspect(std::shared_ptr<Registry> registry, const std::string& name) {
-    auto segment = Segment::open_existing(segment_name(registry->domain(), "topic", name));
+    auto segment = Segment::open_existing(segment_name(registry->domain(), "topic", name), registry->access());
     if (!segment || segment->size() < sizeof(TopicHeader)) return nullptr;
     const auto* header = std::launder(reinterpret_cast<const TopicHeader*>(segment->data()));
     if (header->magic.load(std::memory_order_acquire) != kTopicMagic || header->layout != kLayoutVersion) return nullptr;
@@ -161,7 +161,7 @@ class Topic {
   }
 
  private:
-  // Throws Failure (Errc::type_mismatch) when the header is damaged.
+  // Throws Failure (Errc::damaged) when the header is damaged.
   Topic(std::shared_ptr<Registry> registry, std::string name, Segment segment)
       : registry_{std::move(registry)},
         name_{std::move(name)},
@@ -194,7 +194,7 @@ class Topic {
   static TopicGeometry checked_geometry(const std::string& name, const TopicHeader& header, std::size_t size) {
     const auto geometry = TopicGeometry::of(header);
     if (const auto what = damage(header, geometry, size); !what.empty())
-      throw Failure{{Errc::type_mismatch, "topic '" + name + "': its shared memory is damaged (" + what + ")"}};
+      throw Failure{{Errc::damaged, "topic '" + name + "': its shared memory is damaged (" + what + ")"}};
     return geometry;
   }
 
@@ -210,7 +210,7 @@ class Topic {
     header->chunk_stride = geometry.chunk_stride();
     header->max_subscribers = qos.max_subscribers;
     header->max_held = qos.max_held;
-    header->block_timeout_ns.store(std::chrono::nanoseconds{qos.block_timeout}.count());
+    header->block_timeout_ns.store(saturating_cast<std::chrono::nanoseconds>(qos.block_timeout).count());
     header->ring_offset = geometry.ring_offset();
     header->info_offset = geometry.info_offset();
     header->chunks_offset = geometry.chunks_offset();
