@@ -1,8 +1,12 @@
 // Shm across real processes: the peers are the shm_peer program, started
 // with posix_spawn and killed with SIGKILL at known points.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
+#include <optional>
 #include <cstdint>
 #include <fstream>
 #include <string>
@@ -30,6 +34,28 @@ TEST(ShmProcesses, ASampleFromAnotherProcessIsReadInPlaceInTheSharedSegment) {
   ASSERT_TRUE(sample) << sample.error().describe();
   EXPECT_EQ(*sample->value, 7u);
   EXPECT_TRUE(inside_mapping_of("numbers", sample->value.get())) << "read where the other process wrote it";
+}
+
+// A child forked after its parent joined shares the parent's lease (the
+// lock belongs to the open file description both hold): its copy of the
+// participant going must not release it, or the live parent is taken for
+// dead and its slots are cleared under it.
+TEST(ShmProcesses, AChildForkedAfterJoiningLeavesTheParentsLeaseAlone) {
+  const auto domain = unique_domain("fork");
+  std::optional<shm::Core> core{std::in_place, domain, shm::DomainOptions{.participant = "parent"}};
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    core.reset();  // the child's copy of the parent's participant goes, as at a return from main
+    std::_Exit(0);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  shm::Core other{domain, {.participant = "other"}};
+  bool parent_alive = false;
+  for (const auto& p : other.registry().participants) parent_alive |= p.name == "parent" && p.alive;
+  EXPECT_TRUE(parent_alive) << "the parent, alive, is still seen alive";
 }
 
 TEST(ShmProcesses, APublisherKilledMidLoanLeavesSubscribersRunningAndARestartedOneContinues) {
