@@ -1,10 +1,14 @@
 // The prime tool against real processes: what it lists, measures, prints,
 // sends and cleans, and that observing never slows a publisher.
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <cstring>
+#include <filesystem>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -15,7 +19,9 @@
 #include "optimus/support/redis_server.hpp"
 #include "prime/optimus.hpp"
 #include "prime/shm.hpp"
+#include "prime/shm/detail/service_layout.hpp"
 #include "shm/domain.hpp"
+#include "shm/mapped_topic.hpp"
 #include "shm/messages.hpp"
 #include "shm/peer_process.hpp"
 
@@ -42,10 +48,27 @@ Run prime(const std::string& domain, std::vector<std::string> args) {
   return finished(std::move(args));
 }
 
+// `argv` run as user nobody.
+std::vector<std::string> as_nobody(std::vector<std::string> argv) {
+  argv.insert(argv.begin(), {"setpriv", "--reuid=nobody", "--regid=nogroup", "--clear-groups"});
+  return argv;
+}
+
 // `prime <args...>` as user nobody, to its end.
 Run prime_as_nobody(std::vector<std::string> args) {
-  args.insert(args.begin(), {"setpriv", "--reuid=nobody", "--regid=nogroup", "--clear-groups", PRIME_TOOL_PATH});
-  return finished(std::move(args));
+  args.insert(args.begin(), PRIME_TOOL_PATH);
+  return finished(as_nobody(std::move(args)));
+}
+
+// Whether `condition` holds within `timeout`, looked at every millisecond.
+template <class Condition>
+bool within(std::chrono::milliseconds timeout, Condition condition) {
+  const auto end = Clock::now() + timeout;
+  while (!condition()) {
+    if (Clock::now() >= end) return false;
+    std::this_thread::sleep_for(1ms);
+  }
+  return true;
 }
 
 // The last line of `text` that starts with '{' or '[', as JSON.
@@ -316,6 +339,169 @@ TEST(PrimeTool, ToolsThatJoinADomainLeaveADeadOnesSegmentsAlone) {
   EXPECT_NE(listed.out.find("old"), std::string::npos) << "still there to look at:\n" << listed.out;
   EXPECT_EQ(prime(dead, {"clean"}).code, 0);
   EXPECT_EQ(segments_of(dead), 0);
+}
+
+// Input the tool cannot take is a usage error (exit 2) that names what was
+// wrong, and sends nothing: text after a number, broken JSON or escapes,
+// and numbers of seconds or a rate no clock can hold.
+TEST(PrimeTool, MalformedInputAndOutOfRangeOptionsAreUsageErrorsNamingWhatWasWrong) {
+  const auto domain = unique_domain("tool-usage");
+  PeerProcess listener{{"listen", domain, "tool/cmd"}};
+  PeerProcess server{{"serve", domain, "tool/echo", "echo"}};
+  ASSERT_TRUE(listener.says("listening"));
+  ASSERT_TRUE(server.says("serving"));
+  struct Case {
+    std::vector<std::string> args;
+    std::string says;
+  };
+  for (const auto& c : std::vector<Case>{
+           {{"pub", "tool/cmd", "n=5m"}, "n: expected a number, not \"5m\""},
+           {{"pub", "tool/cmd", R"({"n": )"}, "JSON: unexpected end"},
+           {{"pub", "tool/cmd", R"({"tag": "\ud800"})"}, "a high surrogate without its low one"},
+           {{"pub", "tool/cmd", "n=300000000000000000000"}, "is not a whole number from 0 to"},
+           {{"pub", "tool/cmd", "--rate", "1e-300", "n=1"}, "--rate"},
+           {{"pub", "tool/cmd", "--rate", "nan", "n=1"}, "--rate"},
+           {{"pub", "tool/cmd", "--rate", "inf", "n=1"}, "--rate"},
+           {{"call", "tool/echo", "--timeout", "1e30", "who=1"}, "--timeout"},
+           {{"call", "tool/echo", "--timeout", "-1", "who=1"}, "--timeout"},
+           {{"call", "tool/echo", "--timeout", "nan", "who=1"}, "--timeout"},
+           {{"echo", "tool/cmd", "--timeout", "inf"}, "--timeout"},
+           {{"hz", "tool/cmd", "--duration", "1e30"}, "--duration"},
+           {{"pub", "tool/\x01" "cmd", "n=1"}, "a control character"},
+       }) {
+    const auto run = prime(domain, c.args);
+    EXPECT_EQ(run.code, 2) << c.args[0] << " " << c.args[1] << " " << c.args[2] << ": " << run.out;
+    EXPECT_NE(run.out.find(c.says), std::string::npos) << c.args[2] << ": " << run.out;
+  }
+  ASSERT_EQ(prime(domain, {"pub", "tool/cmd", "n=9"}).code, 0);
+  EXPECT_EQ(listener.line_starting("tick "), "tick 9 0.000000 ") << "the first sample it got is the good one";
+}
+
+// Ctrl-C ends a command that had more to do with 130, so a script never
+// takes an interrupted call for an answer; one that runs until Ctrl-C (hz
+// with no -n or --duration) ends as it always does, with a report and 0.
+TEST(PrimeTool, CtrlCEndsAnUnfinishedCommandWith130AndAnOpenEndedOneWith0) {
+  const auto domain = unique_domain("tool-ctrl-c");
+  shm::Core core{domain};
+  std::atomic<bool> called{false}, released{false};
+  auto slow = core.serve("tool/slow", [&](const Ask& a) {
+    called = true;
+    released.wait(false);
+    return Answer{a.who, a.n};
+  });
+  auto call = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "call", "tool/slow", "who=1", "n=2", "--timeout", "60"}, true);
+  ASSERT_TRUE(within(10s, [&] { return called.load(); })) << "the call reached the server";
+  ::kill(call.pid(), SIGINT);
+  EXPECT_EQ(call.exit_code(10s), 130) << call.all_output();
+  released = true;
+  released.notify_all();
+
+  auto quiet = core.publisher<Tick>("tool/quiet");
+  auto echo = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "echo", "tool/quiet", "-n", "3", "--timeout", "0"}, true);
+  ASSERT_TRUE(within(10s, [&] {
+    for (const auto& p : core.registry().participants)
+      if (p.name == "prime echo" && p.alive) return true;
+    return false;
+  })) << "the echo joined";
+  ::kill(echo.pid(), SIGINT);
+  EXPECT_EQ(echo.exit_code(10s), 130) << "it had 3 samples to print: " << echo.all_output();
+
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "100", "0"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  auto hz = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "hz", "tool/ticks"}, true);
+  ASSERT_TRUE(hz.line_starting("average rate: ", 10s));
+  ::kill(hz.pid(), SIGINT);
+  EXPECT_EQ(hz.exit_code(10s), 0) << "hz runs until Ctrl-C: " << hz.all_output();
+}
+
+// A type description lies in shared memory, where any program of the user
+// may write. One whose counts do not fit its message (here an array of
+// 2^64-1 empty arrays in 0 bytes, which kept echo and call reading for ever)
+// is refused naming the field: echo and call show such values as bytes,
+// pub and call build nothing by it.
+TEST(PrimeTool, AHostileTypeDescriptionIsRefusedByFieldInsteadOfHangingEchoAndCall) {
+  const auto domain = unique_domain("tool-hostile");
+  const std::string hostile = "{n@0:arr18446744073709551615,0(arr0,1(u8))}";
+  shm::Core core{domain};
+  auto publisher = core.publisher<Tick>("tool/ticks");
+  std::strcpy(MappedTopic{domain, "tool/ticks"}.header().schema, hostile.c_str());
+  auto echo = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "echo", "tool/ticks", "-n", "1"}, true);
+  std::optional<int> code;
+  for (std::uint64_t n = 0; !code && n < 2000; ++n) {  // publish until the echo has one and ends
+    ASSERT_TRUE(publisher.publish(Tick{n, 0, {}}));
+    code = echo.exit_code(10ms);
+  }
+  const auto echoed = echo.all_output(1s);
+  ASSERT_EQ(code, 0) << "the echo ended: " << echoed;
+  EXPECT_NE(echoed.find("field 'n': a stride of 0"), std::string::npos) << echoed;
+  EXPECT_NE(echoed.find("\nbytes: "), std::string::npos) << "the sample, as bytes: " << echoed;
+  const auto pub = prime(domain, {"pub", "tool/ticks", "n=1"});
+  EXPECT_EQ(pub.code, 1) << pub.out;
+  EXPECT_NE(pub.out.find("field 'n': a stride of 0"), std::string::npos) << pub.out;
+
+  auto service = core.serve("tool/echo", [](const Ask& a) { return Answer{a.who, a.n}; });
+  auto segment = shm::detail::Segment::open_existing(shm::detail::segment_name(domain, "service", "tool/echo"));
+  ASSERT_TRUE(segment);
+  auto& header = *std::launder(reinterpret_cast<shm::detail::ServiceHeader*>(segment->data()));
+  std::strcpy(header.reply_schema, hostile.c_str());
+  auto call = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "call", "tool/echo", "who=1", "n=2"}, true);
+  ASSERT_EQ(call.exit_code(20s), 0) << "the call ended";
+  const auto answered = call.all_output(1s);
+  EXPECT_NE(answered.find("field 'n': a stride of 0"), std::string::npos) << answered;
+  EXPECT_NE(answered.find("bytes: 01 00 00 00 00 00 00 00 02"), std::string::npos) << "the answer, as bytes: " << answered;
+  std::strcpy(header.request_schema, hostile.c_str());
+  const auto refused = prime(domain, {"call", "tool/echo", "n=2"});
+  EXPECT_EQ(refused.code, 1) << refused.out;
+  EXPECT_NE(refused.out.find("field 'n': a stride of 0"), std::string::npos) << refused.out;
+}
+
+// What clean could not remove it says it could not, with the reason, and
+// exits 1; it never says it removed what is still there. A dead domain of
+// user nobody, one of whose files is root's: /dev/shm (sticky) lets only a
+// file's owner remove it.
+TEST(PrimeTool, CleanReportsARemovalThatFailedWithTheReasonAndExitsNonZero) {
+  if (::geteuid() != 0) GTEST_SKIP() << "needs root, to run the tool as another user";
+  const auto dead = unique_domain("tool-clean-fails");
+  auto crashed = PeerProcess::command(as_nobody({SHM_PEER_PATH, "leave_segments", dead, "old"}));
+  ASSERT_TRUE(crashed.says("created"));
+  crashed.kill9();
+  const std::string topic = "/dev/shm/prime." + dead + ".topic.old";
+  ASSERT_EQ(::chown(topic.c_str(), 0, 0), 0);
+  const auto cleaned = prime_as_nobody({"--domain", dead, "clean"});
+  EXPECT_EQ(cleaned.code, 1) << cleaned.out;
+  EXPECT_NE(cleaned.out.find("could not remove " + topic + ": it belongs to user root"), std::string::npos) << cleaned.out;
+  EXPECT_EQ(cleaned.out.find("removed " + topic), std::string::npos) << cleaned.out;
+  EXPECT_NE(cleaned.out.find("removed /dev/shm/prime." + dead + ".registry."), std::string::npos)
+      << "what it could remove, it did: " << cleaned.out;
+  EXPECT_TRUE(std::filesystem::remove(topic));
+}
+
+// Past 200 characters a segment's name is shortened with a hash, so a long
+// domain name cannot be read back from /dev/shm: domains lists such a
+// domain by the start of its name and says how to reach it, and clean
+// --all names it as left alone. User nobody's, so clean --all here touches
+// no other test's domain.
+TEST(PrimeTool, DomainsAndCleanAllShowADomainWhoseNameIsTooLongForItsSegments) {
+  if (::geteuid() != 0) GTEST_SKIP() << "needs root, to run the tool as another user";
+  const auto domain = unique_domain("tool-long") + "-" + std::string(220, 'x');
+  auto peer = PeerProcess::command(as_nobody({SHM_PEER_PATH, "leave_segments", domain, "mine"}));
+  ASSERT_TRUE(peer.says("created"));
+  const auto start = domain.substr(0, 150);
+  const auto listed = prime_as_nobody({"domains"});
+  EXPECT_EQ(listed.code, 0) << listed.out;
+  EXPECT_NE(listed.out.find(start), std::string::npos) << listed.out;
+  EXPECT_NE(listed.out.find("its name is too long to read back"), std::string::npos) << listed.out;
+  const auto json = last_json(prime_as_nobody({"--json", "domains"}).out);
+  bool found = false;
+  for (const auto& d : json.array()) found = found || text(d, "name").starts_with(start);
+  EXPECT_TRUE(found) << "listed in JSON too";
+  const auto by_name = prime_as_nobody({"--domain", domain, "ls"});
+  EXPECT_NE(by_name.out.find("mine"), std::string::npos) << "--domain with the full name reaches it: " << by_name.out;
+  const auto cleaned = prime_as_nobody({"clean", "--all"});
+  EXPECT_EQ(cleaned.code, 0) << cleaned.out;
+  EXPECT_NE(cleaned.out.find("left domain '" + start), std::string::npos) << cleaned.out;
+  peer.kill9();
+  EXPECT_EQ(prime_as_nobody({"--domain", domain, "clean"}).code, 0) << "what it left, cleaned by its full name";
 }
 
 // Compared with a twin topic no one observes, in batches taken in turn, so a

@@ -4,14 +4,15 @@
 // strings, numbers, true/false/null. Enough to build one message.
 
 #include <cctype>
+#include <charconv>
 #include <cstdio>
-#include <cstdlib>
 #include <functional>
 #include <map>
 #include <memory>
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <variant>
 #include <vector>
 
@@ -47,12 +48,41 @@ inline void append_utf8(std::string& out, unsigned code) {
   }
 }
 
-// Parses `text`; throws std::invalid_argument saying where it went wrong.
+// How deep arrays and objects may nest: deeper input is refused, so no
+// input, however deep, exhausts the stack of the reader (or of what walks
+// the value after it).
+inline constexpr std::size_t kMaxJsonDepth = 64;
+
+// How many characters the JSON number `text` starts with takes; 0 when it
+// starts with none (JSON writes no hex, '+', leading zero, bare point,
+// infinity or NaN).
+inline std::size_t json_number_length(std::string_view text) {
+  std::size_t at = 0;
+  const auto digits = [&] {
+    const auto start = at;
+    while (at < text.size() && text[at] >= '0' && text[at] <= '9') ++at;
+    return at > start;
+  };
+  if (at < text.size() && text[at] == '-') ++at;
+  if (at < text.size() && text[at] == '0') ++at;
+  else if (!digits()) return 0;
+  if (at < text.size() && text[at] == '.' && (++at, !digits())) return 0;
+  if (at < text.size() && (text[at] == 'e' || text[at] == 'E')) {
+    ++at;
+    if (at < text.size() && (text[at] == '+' || text[at] == '-')) ++at;
+    if (!digits()) return 0;
+  }
+  return at;
+}
+
+// Parses `text`; throws std::invalid_argument saying what went wrong and where.
 inline Json parse_json(std::string_view text) {
   std::size_t at = 0;
-  auto fail = [&](const std::string& what) -> Json {
-    throw std::invalid_argument{"JSON: " + what + " at character " + std::to_string(at + 1)};
+  std::size_t depth = 0;
+  auto fail_at = [&](const std::string& what, std::size_t where) -> Json {
+    throw std::invalid_argument{"JSON: " + what + " at character " + std::to_string(where + 1)};
   };
+  auto fail = [&](const std::string& what) { return fail_at(what, at); };
   auto skip = [&] {
     while (at < text.size() && std::isspace(static_cast<unsigned char>(text[at]))) ++at;
   };
@@ -61,15 +91,28 @@ inline Json parse_json(std::string_view text) {
     if (at >= text.size() || text[at] != c) fail(std::string{"expected '"} + c + "'");
     ++at;
   };
+  // The four hex digits of the \u escape whose 'u' is at `u`.
+  auto hex4 = [&](std::size_t u) {
+    unsigned code = 0;
+    for (std::size_t i = u + 1; i < u + 5; ++i) {
+      const char c = i < text.size() ? text[i] : '\0';
+      const int digit = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : c >= 'A' && c <= 'F' ? c - 'A' + 10 : -1;
+      if (digit < 0) fail_at("a \\u escape without four hex digits", u - 1);
+      code = code * 16 + static_cast<unsigned>(digit);
+    }
+    return code;
+  };
   std::function<Json()> value = [&]() -> Json {
     skip();
     if (at >= text.size()) return fail("unexpected end");
     const char c = text[at];
+    if ((c == '{' || c == '[') && ++depth > kMaxJsonDepth)
+      return fail("arrays and objects nested more than " + std::to_string(kMaxJsonDepth) + " deep");
     if (c == '{') {
       ++at;
       auto object = std::make_shared<Json::Object>();
       skip();
-      if (at < text.size() && text[at] == '}') return ++at, Json{object};
+      if (at < text.size() && text[at] == '}') return ++at, --depth, Json{object};
       while (true) {
         skip();
         auto key = value();
@@ -82,6 +125,7 @@ inline Json parse_json(std::string_view text) {
           continue;
         }
         expect('}');
+        --depth;
         return Json{object};
       }
     }
@@ -89,7 +133,7 @@ inline Json parse_json(std::string_view text) {
       ++at;
       auto array = std::make_shared<Json::Array>();
       skip();
-      if (at < text.size() && text[at] == ']') return ++at, Json{array};
+      if (at < text.size() && text[at] == ']') return ++at, --depth, Json{array};
       while (true) {
         array->push_back(value());
         skip();
@@ -98,6 +142,7 @@ inline Json parse_json(std::string_view text) {
           continue;
         }
         expect(']');
+        --depth;
         return Json{array};
       }
     }
@@ -116,13 +161,15 @@ inline Json parse_json(std::string_view text) {
           case 'b': s.push_back('\b'); break;
           case 'f': s.push_back('\f'); break;
           case 'u': {
-            unsigned code = 0;
-            if (at + 4 >= text.size() || std::sscanf(std::string{text.substr(at + 1, 4)}.c_str(), "%4x", &code) != 1)
-              return fail("a \\u escape without four hex digits");
+            const auto escape = at - 1;
+            auto code = hex4(at);
             at += 4;
-            unsigned low = 0;  // a pair of surrogates is one code point
-            if (code >= 0xd800 && code < 0xdc00 && text.substr(at + 1, 2) == "\\u" && at + 6 < text.size() &&
-                std::sscanf(std::string{text.substr(at + 3, 4)}.c_str(), "%4x", &low) == 1 && low >= 0xdc00 && low < 0xe000) {
+            // A code point past U+FFFF is a pair of surrogates: a high one, then a low one.
+            if (code >= 0xdc00 && code < 0xe000) return fail_at("a low surrogate without a high one", escape);
+            if (code >= 0xd800 && code < 0xdc00) {
+              const bool low_follows = text.substr(at + 1, 2) == "\\u";
+              const auto low = low_follows ? hex4(at + 2) : 0;
+              if (low < 0xdc00 || low >= 0xe000) return fail_at("a high surrogate without its low one", escape);
               code = 0x10000 + ((code - 0xd800) << 10) + (low - 0xdc00);
               at += 6;
             }
@@ -139,11 +186,12 @@ inline Json parse_json(std::string_view text) {
     if (text.substr(at, 4) == "true") return at += 4, Json{true};
     if (text.substr(at, 5) == "false") return at += 5, Json{false};
     if (text.substr(at, 4) == "null") return at += 4, Json{nullptr};
-    const std::string rest{text.substr(at)};
-    char* end = nullptr;
-    const double number = std::strtod(rest.c_str(), &end);
-    if (end == rest.c_str()) return fail("unexpected '" + std::string(1, c) + "'");
-    at += static_cast<std::size_t>(end - rest.c_str());
+    const auto length = json_number_length(text.substr(at));
+    if (length == 0) return fail(c == '-' || (c >= '0' && c <= '9') ? "a malformed number" : "unexpected '" + std::string(1, c) + "'");
+    double number = 0;
+    if (std::from_chars(text.data() + at, text.data() + at + length, number).ec != std::errc{})
+      return fail("a number out of range");
+    at += length;
     return Json{number};
   };
   auto result = value();

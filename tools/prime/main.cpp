@@ -6,10 +6,13 @@
 // Shm domains (the default; --domain, or PRIME_DOMAIN, or "robot") and
 // Optimus domains (--redis tcp://host:port or unix:///path, with --domain as
 // the key prefix).
-// Exit codes: 0 done, 1 failed, 2 wrong usage, 3 no such domain, topic or
-// service, 4 nothing arrived in time, 5 Redis unreachable.
+// Exit codes: 0 done, 1 failed, 2 wrong usage (options, names or values),
+// 3 no such domain, topic or service, 4 nothing arrived in time, 5 Redis
+// unreachable, 130 interrupted by Ctrl-C before done.
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <csignal>
 #include <ctime>
@@ -17,10 +20,13 @@
 #include <exception>
 #include <functional>
 #include <iostream>
+#include <stdexcept>
 #include <string>
+#include <system_error>
 
 #include "prime/logic/error.hpp"
 #include "bench/command.hpp"
+#include "json.hpp"
 #include "shm_commands.hpp"
 
 namespace {
@@ -32,6 +38,31 @@ std::string bench_folder_name() {
   char text[48];
   std::strftime(text, sizeof text, "prime-bench-%Y%m%d-%H%M%S", std::gmtime(&now));
   return text;
+}
+
+// The most seconds an option takes: a year. Past it (or NaN, or infinity) a
+// conversion to the clock's nanoseconds would overflow.
+constexpr double kMaxSeconds = 365.0 * 24 * 3600;
+constexpr auto kSecondsText = "from 0 to 31536000 seconds (a year)";
+
+// A decimal number from `low` to `high` (`range` says so in words);
+// anything else ("1e999", "nan", "inf", "0x10") is refused before a
+// command converts it.
+CLI::Validator number_in(double low, double high, const std::string& range) {
+  return CLI::Validator{[=](std::string& text) {
+                          double v = 0;
+                          const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), v);
+                          const bool ok = error == std::errc{} && end == text.data() + text.size() && v >= low && v <= high;
+                          return ok ? std::string{} : "'" + text + "' is not a number " + range;
+                        },
+                        "NUMBER " + range};
+}
+
+// A name a command line gives: one with a control character is a mistake
+// (and one with a NUL, which no command line carries, no registry takes).
+void check_name(const std::string& what, const std::string& name) {
+  if (std::ranges::any_of(name, [](unsigned char c) { return c < 0x20 || c == 0x7f; }))
+    throw std::invalid_argument{what + " " + prime::tool::quote(name) + " has a control character"};
 }
 
 int exit_for(prime::Errc code) {
@@ -72,7 +103,7 @@ int main(int argc, char** argv) {
     return sub;
   };
   auto duration = [&](CLI::App* sub) {
-    sub->add_option("--duration", o.duration, "seconds to run (default: until Ctrl-C)");
+    sub->add_option("--duration", o.duration, "seconds to run (default: until Ctrl-C)")->check(number_in(0, kMaxSeconds, kSecondsText));
     sub->add_option("-n,--count", o.count, "stop after this many samples");
     sub->add_option("--window", o.window, "samples the figures are taken over (default 100)");
   };
@@ -99,18 +130,19 @@ int main(int argc, char** argv) {
                        [&] { return optimus_watch(o, "echo"); });
   echo->add_option("topic", o.name)->required();
   echo->add_option("-n,--count", o.count, "stop after this many samples");
-  echo->add_option("--timeout", o.timeout, "seconds to wait for the first sample (default 5; 0: forever)");
+  const auto seconds = number_in(0, kMaxSeconds, kSecondsText);
+  echo->add_option("--timeout", o.timeout, "seconds to wait for the first sample (default 5; 0: forever)")->check(seconds);
   auto* pub = command("pub", "publish a message built from JSON or field=value words", [&] { return shm_pub(o); });
   pub->add_option("topic", o.name)->required();
   pub->add_option("values", o.values, "{\"x\": 1} or x=1 y=2 pose.theta=0.5")->required();
   pub->add_option("--rate", o.rate, "publish this many times a second until --count or Ctrl-C (default: once)")
-      ->check(CLI::PositiveNumber);
+      ->check(number_in(1e-6, 1e9, "from 0.000001 to 1000000000 a second"));
   pub->add_option("-n,--count", o.count, "with --rate: how many");
   auto* call = command("call", "call a service with a request built from JSON or field=value words",
                        [&] { return shm_call(o); });
   call->add_option("service", o.name)->required();
   call->add_option("values", o.values, "{\"x\": 1} or x=1 y=2")->required();
-  call->add_option("--timeout", o.timeout, "seconds to wait for the answer (default 5)");
+  call->add_option("--timeout", o.timeout, "seconds to wait for the answer (default 5)")->check(seconds);
   command("graph", "the running system as Graphviz DOT", [&] { return shm_graph(o); }, [&] { return optimus_graph(o); });
   command("clean", "remove what dead participants left; never touches a live one's", [&] { return shm_clean(o); })
       ->add_flag("--all", o.all, "every domain on this machine, not only --domain");
@@ -132,12 +164,17 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : int{kUsage};
   }
-  std::signal(SIGINT, [](int) { std::_Exit(kOk); });  // replaced by commands that want to finish their report
+  std::signal(SIGINT, [](int) { std::_Exit(kInterrupted); });  // replaced by commands that want to finish their report
   try {
+    check_name("domain", o.domain);
+    check_name("name", o.name);
     return run();
   } catch (const prime::Failure& f) {
     std::cerr << "prime: " << f.error().message << '\n';
     return exit_for(f.error().code);
+  } catch (const std::invalid_argument& e) {  // what the command line gave: a value, JSON, a name
+    std::cerr << "prime: " << e.what() << '\n';
+    return kUsage;
   } catch (const std::exception& e) {
     std::cerr << "prime: " << e.what() << '\n';
     return kFailed;

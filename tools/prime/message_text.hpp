@@ -5,6 +5,7 @@
 // YAML-like lines or JSON, and bytes built from JSON.
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -17,6 +18,7 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <vector>
 
 #include "json.hpp"
@@ -39,15 +41,22 @@ struct Layout {
   std::vector<Field> fields;              // of a record
 };
 
+// How deep types may nest in a description: deeper ones are refused, so
+// no description, however deep, exhausts the stack of what walks it.
+inline constexpr std::size_t kMaxLayoutDepth = 64;
+
 namespace detail {
 
+// A description is text another program wrote (std::runtime_error: not the
+// user's mistake, unlike bad input, which is std::invalid_argument).
 struct LayoutParser {
   std::string_view text;
   std::size_t at = 0;
+  std::size_t depth = 0;
 
   [[noreturn]] void fail(const std::string& what) const {
-    throw std::invalid_argument{"type description: " + what + " at character " + std::to_string(at + 1) + " of '" +
-                                std::string{text} + "'"};
+    throw std::runtime_error{"type description: " + what + " at character " + std::to_string(at + 1) + " of '" +
+                             std::string{text} + "'"};
   }
   bool take(char c) {
     if (at < text.size() && text[at] == c) return ++at, true;
@@ -58,7 +67,9 @@ struct LayoutParser {
   }
   std::size_t count() {
     std::size_t n = 0, digits = 0;
-    while (at < text.size() && text[at] >= '0' && text[at] <= '9') n = n * 10 + static_cast<std::size_t>(text[at++] - '0'), ++digits;
+    for (; at < text.size() && text[at] >= '0' && text[at] <= '9'; ++at, ++digits)
+      if (__builtin_mul_overflow(n, 10, &n) || __builtin_add_overflow(n, static_cast<std::size_t>(text[at] - '0'), &n))
+        fail("a number too large");
     if (digits == 0) fail("expected a number");
     return n;
   }
@@ -68,6 +79,7 @@ struct LayoutParser {
     return std::string{text.substr(start, at - start)};
   }
   std::shared_ptr<const Layout> type() {
+    if (++depth > kMaxLayoutDepth) fail("types nested more than " + std::to_string(kMaxLayoutDepth) + " deep");
     auto layout = std::make_shared<Layout>();
     auto word = [&](std::string_view w) {
       if (text.substr(at, w.size()) != w) return false;
@@ -127,11 +139,13 @@ struct LayoutParser {
           at += n.size();
           layout->kind = Layout::Kind::number;
           layout->number = std::string{n};
+          --depth;
           return layout;
         }
       }
       fail("unknown type");
     }
+    --depth;
     return layout;
   }
 };
@@ -210,11 +224,82 @@ inline std::size_t extent(const Layout& t) {
   return kNever;
 }
 
-// The layout `description` (prime::schema_of's text) gives.
+namespace detail {
+
+// How many values a reader of `t` visits, not counting records (which
+// hold them): numbers, characters, texts, opaque values and empty arrays,
+// each a byte at least in any real type. The most a size can be when that
+// overflows.
+inline std::size_t values(const Layout& t) {
+  switch (t.kind) {
+    case Layout::Kind::vector:
+    case Layout::Kind::array: return t.capacity == 0 ? 1 : times(t.capacity, values(*t.element));
+    case Layout::Kind::record: {
+      std::size_t n = 0;
+      for (const auto& f : t.fields) n = plus(n, values(*f.type));
+      return n;
+    }
+    default: return 1;
+  }
+}
+
+// Throws std::runtime_error naming the field (`path`) of `t` that does not
+// fit in the `room` bytes it has: every count and extent is held against
+// the message before anything reads or writes by them.
+inline void check_fits(const Layout& t, std::size_t room, const std::string& path) {
+  auto wrong = [&](const std::string& what) {
+    throw std::runtime_error{(path.empty() ? std::string{"the message"} : "field '" + path + "'") + ": " + what};
+  };
+  const auto n = [](std::size_t v) { return std::to_string(v); };
+  switch (t.kind) {
+    case Layout::Kind::vector:
+    case Layout::Kind::array: {
+      if (t.stride == 0) wrong("a stride of 0");
+      check_fits(*t.element, t.stride, path + "[]");  // an element fits in its stride
+      const auto start = t.kind == Layout::Kind::vector ? t.data_offset : 0;
+      if (start > room || t.capacity > (room - start) / t.stride)
+        wrong(n(t.capacity) + " elements of " + n(t.stride) + " bytes do not fit in " + n(start > room ? 0 : room - start));
+      break;
+    }
+    case Layout::Kind::text:
+      if (t.data_offset > room || t.capacity >= room - t.data_offset)
+        wrong(n(t.capacity) + " characters do not fit in " + n(t.data_offset > room ? 0 : room - t.data_offset) + " bytes");
+      break;
+    case Layout::Kind::record:
+      for (const auto& f : t.fields) {
+        const auto name = path.empty() ? f.name : path + "." + f.name;
+        if (f.offset > room)
+          throw std::runtime_error{"field '" + name + "': offset " + n(f.offset) + " is past the " + n(room) + " bytes of its record"};
+        check_fits(*f.type, room - f.offset, name);
+      }
+      break;
+    default: break;
+  }
+  if (const auto reach = extent(t); reach > room) wrong(n(reach) + " bytes do not fit in " + n(room));
+}
+
+}  // namespace detail
+
+// The layout `description` (prime::schema_of's text) gives, to list its
+// fields; throws std::runtime_error when it is not a description.
 inline std::shared_ptr<const Layout> parse_layout(std::string_view description) {
   detail::LayoutParser parser{description};
   auto layout = parser.type();
   if (parser.at != description.size()) parser.fail("text after the type");
+  return layout;
+}
+
+// The same, to read or write messages of `size` bytes by: a description is
+// text another program wrote in shared memory, so every count and extent in
+// it must fit in the message, and it may name no more values than the
+// message has bytes (so reading a message by it takes time in proportion to
+// the message). Throws std::runtime_error naming the field that does not.
+inline std::shared_ptr<const Layout> parse_layout(std::string_view description, std::size_t size) {
+  auto layout = parse_layout(description);
+  detail::check_fits(*layout, size, "");
+  if (const auto n = detail::values(*layout); n > size)
+    throw std::runtime_error{"it names " + std::to_string(n) + " values in " + std::to_string(size) +
+                             " bytes: fields laid over one another"};
   return layout;
 }
 
@@ -288,11 +373,11 @@ inline void fill(const Layout& t, std::byte* data, const Json& value, const std:
   auto number = [&]() -> double {
     if (auto* d = std::get_if<double>(&value.value)) return *d;
     if (auto* b = std::get_if<bool>(&value.value)) return *b ? 1 : 0;
-    if (auto* s = std::get_if<std::string>(&value.value)) {
-      try {
-        return std::stod(*s);
-      } catch (...) {
-      }
+    if (auto* s = std::get_if<std::string>(&value.value)) {  // all of it a number ("nan" too), or none
+      double v = 0;
+      const auto [end, error] = std::from_chars(s->data(), s->data() + s->size(), v);
+      if (error == std::errc{} && end == s->data() + s->size()) return v;
+      wrong("expected a number, not " + quote(*s));
     }
     wrong("expected a number");
     return 0;
@@ -369,7 +454,9 @@ inline void fill(const Layout& t, std::byte* data, const Json& value, const std:
 }
 
 // `field=value` words ("x=1", "pose.theta=0.5", "frame=laser", "ranges=[1,2]")
-// as one JSON object; a value that is not JSON is text.
+// as one JSON object; a value that is not JSON is text, unless it starts
+// as JSON's lists, objects and strings do: then it is meant as JSON, and
+// its error is the answer.
 inline Json from_assignments(const std::vector<std::string>& words) {
   auto root = std::make_shared<Json::Object>();
   for (const auto& word : words) {
@@ -380,7 +467,9 @@ inline Json from_assignments(const std::vector<std::string>& words) {
     Json v;
     try {
       v = parse_json(text);
-    } catch (const std::invalid_argument&) {
+    } catch (const std::invalid_argument& e) {
+      if (!text.empty() && (text[0] == '[' || text[0] == '{' || text[0] == '"'))
+        throw std::invalid_argument{path + ": " + e.what()};
       v = Json{text};
     }
     auto* object = root.get();

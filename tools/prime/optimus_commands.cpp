@@ -235,7 +235,7 @@ int optimus_watch(const Options& o, const std::string& command) {
       std::cout << "sequence: " << (id ? sequence : "?") << "\nstamp: " << (entry->stamp ? stamp + " ns" : "?")
                 << "\nsize: " << bytes.size() << "\nbytes: " << hex(bytes) << "\n---" << std::endl;
   }
-  return seen > 0 ? int{kOk} : int{kNothing};
+  return after_ctrl_c(o.count == 0, seen > 0 ? int{kOk} : int{kNothing});
 }
 
 int optimus_graph(const Options& o) {

@@ -1,11 +1,18 @@
 // `prime` on shared-memory domains.
 #include "shm_commands.hpp"
 
+#include <pwd.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <map>
@@ -32,6 +39,7 @@ void finish_on_ctrl_c() {
   std::signal(SIGINT, [](int) { stop_requested = true; });
 }
 bool ctrl_c_pressed() { return stop_requested; }
+int after_ctrl_c(bool open_ended, int code) { return ctrl_c_pressed() && !open_ended ? int{kInterrupted} : code; }
 
 Clock::time_point first_sample_by(const Options& o, Clock::time_point start) {
   if (o.timeout <= 0) return Clock::time_point::max();
@@ -107,11 +115,12 @@ struct Watch {
   shm::Core core;
   Reader<shm::View<shm::Bytes>> reader;
   std::string schema;
+  std::size_t max_message_size = 0;
 
   Watch(const Options& o, const std::string& command)
       : core{check(o.domain), {.participant = "prime " + command, .only_if_alive = true}}, reader{core.observe(o.name)} {
     for (const auto& t : core.registry().topics)
-      if (t.name == o.name) schema = t.schema;
+      if (t.name == o.name) schema = t.schema, max_message_size = t.qos.max_message_size;
   }
   static std::string check(const std::string& domain) {
     snapshot_of(domain);  // a domain that is not there is an error, not one this tool starts
@@ -119,10 +128,67 @@ struct Watch {
   }
 };
 
+// The layout to show messages of up to `size` bytes by; none (they show as
+// bytes) for a type with no description, or one that does not fit them,
+// which is said once, naming the field.
+std::shared_ptr<const Layout> layout_to_show(const std::string& schema, std::size_t size, const std::string& of) {
+  try {
+    auto layout = parse_layout(schema, size);
+    if (layout->kind != Layout::Kind::opaque) return layout;
+  } catch (const std::runtime_error& e) {
+    std::cerr << "prime: the type description of " << of << " is refused, so its values show as bytes: " << e.what() << '\n';
+  }
+  return nullptr;
+}
+
+// shm::domains(), and the domains it cannot see. Past 200 characters a
+// segment's name is shortened with a hash ("prime.<its start>#<hash>"), so
+// a long domain's name cannot be read back from /dev/shm: its registry is
+// known by its magic number, and listed by the start of its name, with how
+// to reach it.
+std::vector<shm::DomainSummary> all_domains() {
+  auto found = shm::domains();
+  std::error_code ignored;
+  for (const auto& entry : std::filesystem::directory_iterator{shm::detail::kShmDirectory, ignored}) {
+    const auto file = entry.path().filename().string();
+    const auto hash = file.rfind('#');
+    if (!file.starts_with("prime.") || hash == std::string::npos ||
+        entry.symlink_status(ignored).type() != std::filesystem::file_type::regular)  // no FIFO to block on
+      continue;
+    std::uint64_t magic = 0;
+    std::ifstream in{entry.path(), std::ios::binary};
+    if (!in.read(reinterpret_cast<char*>(&magic), sizeof magic) || magic != shm::detail::kRegistryMagic) continue;
+    const auto start = file.substr(6, std::min(hash, file.find('.', 6)) - 6);  // an escaped name has no '.'
+    found.push_back({.name = shm::detail::unescape(start) + "...",
+                     .unreadable = "its name is too long to read back from " + file +
+                                   " in /dev/shm: --domain with its full name reaches it"});
+  }
+  std::ranges::sort(found, {}, &shm::DomainSummary::name);
+  return found;
+}
+
+// shm::clean says "removed <path>" of each segment it tried to remove: one
+// still there it did not remove, and this says so, with why (/dev/shm lets
+// only a file's owner remove it). Nothing for any other line.
+std::optional<std::string> failed_removal(const std::string& line) {
+  const std::string removed = "removed ";
+  if (!line.starts_with(removed)) return std::nullopt;
+  const auto path = line.substr(removed.size());
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) != 0) return std::nullopt;
+  if (st.st_uid == ::geteuid()) return "could not remove " + path + ": it is still there";
+  passwd entry{};
+  passwd* user = nullptr;
+  char text[1024];
+  const std::string name = ::getpwuid_r(st.st_uid, &entry, text, sizeof text, &user) == 0 && user ? user->pw_name : "?";
+  return "could not remove " + path + ": it belongs to user " + name + " (uid " + std::to_string(st.st_uid) +
+         "), and only a file's owner may remove it";
+}
+
 }  // namespace
 
 int shm_domains(const Options& o) {
-  const auto found = shm::domains();
+  const auto found = all_domains();
   if (o.json) {
     std::string out = "[";
     for (std::size_t i = 0; i < found.size(); ++i) {
@@ -259,13 +325,8 @@ int shm_watch(const Options& o, const std::string& command) {
 
 int shm_echo(const Options& o) {
   Watch w{o, "echo"};
-  std::shared_ptr<const Layout> layout;
-  try {
-    layout = parse_layout(w.schema);
-  } catch (const std::exception&) {
-  }
-  const bool described = layout && layout->kind != Layout::Kind::opaque;
-  const auto reach = described ? extent(*layout) : 0;
+  const auto layout = layout_to_show(w.schema, w.max_message_size, "'" + o.name + "'");
+  const auto reach = layout ? extent(*layout) : 0;
   finish_on_ctrl_c();
   std::size_t seen = 0;
   const auto first_by = first_sample_by(o, Clock::now());
@@ -277,7 +338,7 @@ int shm_echo(const Options& o) {
     }
     ++seen;
     const auto bytes = sample->value.bytes();
-    const bool by_fields = described && reach <= bytes.size();  // a sample shorter than its description: as bytes
+    const bool by_fields = layout && reach <= bytes.size();  // a sample shorter than its description: as bytes
     const auto stamp_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(sample->stamp.time_since_epoch()).count();
     if (o.json) {
       std::cout << "{\"sequence\":" << sample->value.sequence() << ",\"stamp_ns\":" << stamp_ns << ",\"size\":" << bytes.size()
@@ -292,7 +353,7 @@ int shm_echo(const Options& o) {
                 << "\nbytes: " << hex(bytes) << "\n---" << std::endl;
     }
   }
-  return seen > 0 ? int{kOk} : int{kNothing};
+  return after_ctrl_c(o.count == 0, seen > 0 ? int{kOk} : int{kNothing});
 }
 
 namespace {
@@ -300,12 +361,15 @@ namespace {
 // The message `words` say (one JSON object, or field=value words), laid out
 // as `schema` describes in `size` bytes, the rest zero.
 std::vector<std::byte> build(const std::string& schema, std::size_t size, const std::vector<std::string>& words) {
-  const auto layout = parse_layout(schema);
+  std::shared_ptr<const Layout> layout;
+  try {
+    layout = parse_layout(schema, size);
+  } catch (const std::runtime_error& e) {
+    throw Failure{{Errc::type_mismatch, std::string{"its type description does not fit its "} + std::to_string(size) +
+                                            "-byte messages (damaged, or written by a foreign program): " + e.what()}};
+  }
   if (layout->kind != Layout::Kind::record)
     throw Failure{{Errc::type_mismatch, "its type has no description (PRIME_DESCRIBE next to the type): it cannot be built from text"}};
-  if (extent(*layout) > size)
-    throw Failure{{Errc::type_mismatch, "its description reaches past its " + std::to_string(size) +
-                                            "-byte messages (damaged, or written by a foreign program): '" + schema + "'"}};
   const auto value = words.size() == 1 && !words[0].empty() && words[0][0] == '{' ? parse_json(words[0]) : from_assignments(words);
   std::vector<std::byte> bytes(size);
   fill(*layout, bytes.data(), value);
@@ -333,7 +397,7 @@ int shm_pub(const Options& o) {
     if (o.rate == 0 || (o.count > 0 && sent >= o.count)) break;
   }
   if (!o.json) std::cout << "published " << sent << (sent == 1 ? " sample" : " samples") << " on '" << o.name << "'\n";
-  return kOk;
+  return after_ctrl_c(o.rate > 0 && o.count == 0, kOk);
 }
 
 int shm_call(const Options& o) {
@@ -342,7 +406,9 @@ int shm_call(const Options& o) {
   if (!v) throw Failure{{Errc::not_found, "no service '" + o.name + "' in shm domain '" + o.domain + "'"}};
   const auto request = build(v->request_schema, v->qos.max_request_size, o.values);
   shm::Core core{o.domain, {.participant = "prime call", .only_if_alive = true}};
-  auto service = core.raw_chain(o.name, {.timeout = std::chrono::milliseconds{static_cast<long>(o.timeout * 1000)}});
+  // At least a millisecond: 0 would mean the service's own timeout. (main bounds --timeout.)
+  const auto timeout = std::chrono::milliseconds{static_cast<std::int64_t>(std::ceil(o.timeout * 1000))};
+  auto service = core.raw_chain(o.name, {.timeout = timeout});
   std::vector<std::byte> reply;
   auto done = service.call_in_place(
       [&](std::span<std::byte> to) {
@@ -351,18 +417,12 @@ int shm_call(const Options& o) {
       },
       [&](std::span<const std::byte> from) { reply.assign(from.begin(), from.end()); });
   if (!done) throw Failure{done.error()};
-  std::shared_ptr<const Layout> layout;
-  try {
-    layout = parse_layout(v->reply_schema);
-    if (extent(*layout) > reply.size()) layout = nullptr;  // an answer shorter than its description: as bytes
-  } catch (const std::exception&) {
-  }
+  const auto layout = layout_to_show(v->reply_schema, reply.size(), "the answer of '" + o.name + "'");
   if (o.json) {
-    std::cout << (layout && layout->kind != Layout::Kind::opaque ? to_json(*layout, reply.data()) : quote(hex(reply, reply.size())))
-              << '\n';
+    std::cout << (layout ? to_json(*layout, reply.data()) : quote(hex(reply, reply.size()))) << '\n';
   } else if (layout && layout->kind == Layout::Kind::record) {
     print_fields(std::cout, *layout, reply.data());
-  } else if (layout && layout->kind != Layout::Kind::opaque) {
+  } else if (layout) {
     std::cout << to_json(*layout, reply.data()) << '\n';
   } else {
     std::cout << "bytes: " << hex(reply) << '\n';
@@ -400,25 +460,31 @@ int shm_graph(const Options& o) {
 int shm_clean(const Options& o) {
   std::vector<std::string> domains;
   if (o.all) {
-    for (const auto& d : shm::domains())
+    for (const auto& d : all_domains())
       if (d.unreadable.empty()) domains.push_back(d.name);
       else std::cerr << "prime: left domain '" << d.name << "' alone: " << d.unreadable << '\n';
   } else {
     snapshot_of(o.domain);
     domains.push_back(o.domain);
   }
-  std::size_t actions = 0;
+  std::size_t done = 0, failed = 0;
   std::string json = "[";
   for (const auto& d : domains) {
     for (const auto& line : shm::clean(d)) {
-      ++actions;
-      if (o.json) json += (json.size() > 1 ? "," : "") + std::string{"{\"domain\":"} + quote(d) + ",\"done\":" + quote(line) + "}";
-      else std::cout << d << ": " << line << '\n';
+      const auto failure = failed_removal(line);
+      ++(failure ? failed : done);
+      if (o.json)
+        json += (json.size() > 1 ? "," : "") + std::string{"{\"domain\":"} + quote(d) +
+                (failure ? ",\"failed\":" + quote(*failure) : ",\"done\":" + quote(line)) + "}";
+      else if (failure)
+        std::cerr << "prime: " << d << ": " << *failure << '\n';
+      else
+        std::cout << d << ": " << line << '\n';
     }
   }
   if (o.json) std::cout << json << "]\n";
-  else if (actions == 0) std::cout << "nothing to clean: no dead participant left anything\n";
-  return kOk;
+  else if (done + failed == 0) std::cout << "nothing to clean: no dead participant left anything\n";
+  return failed > 0 ? int{kFailed} : int{kOk};
 }
 
 }  // namespace prime::tool

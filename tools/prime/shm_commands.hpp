@@ -29,6 +29,10 @@ struct Options {
 // the process, so it finishes its report.
 void finish_on_ctrl_c();
 bool ctrl_c_pressed();
+// What such a command exits with: `code`, or kInterrupted when Ctrl-C cut
+// it short. One that runs until Ctrl-C (`open_ended`: given no count or
+// duration) is done when it comes.
+int after_ctrl_c(bool open_ended, int code);
 
 // When echo gives up waiting for a first sample: --timeout after `start`
 // (never, for 0); and giving up, saying so, with the exit code for it.
@@ -36,7 +40,7 @@ Clock::time_point first_sample_by(const Options& o, Clock::time_point start);
 int nothing_published(const Options& o);
 
 // What a command's exit code says.
-enum Exit : int { kOk = 0, kFailed = 1, kUsage = 2, kNotFound = 3, kNothing = 4, kUnreachable = 5 };
+enum Exit : int { kOk = 0, kFailed = 1, kUsage = 2, kNotFound = 3, kNothing = 4, kUnreachable = 5, kInterrupted = 130 };
 
 int shm_domains(const Options& o);
 int shm_ls(const Options& o);

@@ -117,7 +117,7 @@ int watch(const Options& o, const std::string& command, const NextSample& next) 
     }
   }
   if (seen != reported) figures.print();  // what came since the last report
-  return seen > 0 ? int{kOk} : int{kNothing};
+  return after_ctrl_c(o.count == 0 && o.duration == 0, seen > 0 ? int{kOk} : int{kNothing});
 }
 
 }  // namespace prime::tool
