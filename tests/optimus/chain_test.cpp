@@ -200,7 +200,9 @@ TEST_F(OptimusChain, StoppingABusyWorkerLosesNoRequestItWasHandedOut) {
   const auto key = domain + ":svc:echo";
   constexpr int kRequests = 300;
   for (int round = 0; round < 10; ++round) {
-    const auto reply = [&](int i) { return domain + ":test-reply:" + std::to_string(round) + ":" + std::to_string(i); };
+    const auto reply = [&](int i) {
+      return optimus::detail::reply_key(domain, "1." + std::to_string(round), static_cast<std::uint64_t>(i));
+    };
     for (int i = 0; i < kRequests; ++i) {
       std::string envelope;
       optimus::detail::encode_request(static_cast<std::uint64_t>(i), reply(i), {}, 0, optimus::encode_message(i), envelope);

@@ -109,6 +109,59 @@ TEST_F(OptimusProcess, AKilledBlockReaderIsWaitedForOnlyUntilItsLeaseRunsOut) {
   EXPECT_FALSE(more) << "no longer waited for: " << more->value.describe();
 }
 
+// A caller killed while its request waits for a worker that never comes
+// (the service's process died too, or it was an anonymous one) leaves the
+// request behind: it goes away by itself soon after the call's deadline,
+// rather than staying in the service's list for good.
+TEST_F(OptimusProcess, ARequestOfAKilledCallerExpiresSoonAfterItsDeadline) {
+  RawRedis raw{shared_redis().url()};
+  const auto requests = domain + ":svc:nobody";
+  auto caller = helper({"call", "nobody", "60000"});
+  ASSERT_TRUE(eventually([&] { return raw.integer({"LLEN", requests}) == 1; })) << "the request was sent";
+  caller.kill();  // kill -9: it never withdraws its request
+  const auto ttl = raw.integer({"PTTL", requests});
+  EXPECT_GT(ttl, 0) << "the request has an expiry";
+  EXPECT_LE(ttl, 60'000 + 10'000) << "the call's deadline and a margin";
+  raw.command({"DEL", requests});
+}
+
+// `block` readers killed (kill -9: no goodbye) leave no field in their
+// source's readers hash once their leases have run out: a writer that looks
+// strikes them (one values were dropped for, and so has a count there, and
+// one that had room), and so does a reader that subscribes.
+TEST_F(OptimusProcess, KilledBlockReadersLeaveNothingInTheReadersHash) {
+  optimus::Core core{options()};
+  auto errors = core.errors().subscribe();
+  auto publisher = core.publisher<int>("held", {.capacity = 8, .overflow = Overflow::block, .block_timeout = 50ms});
+  RawRedis raw{shared_redis().url()};
+  const auto readers = domain + ":readers:held";
+  const auto leases_gone = [&] {
+    const auto give_up = Clock::now() + 10s;
+    while (raw.command({"KEYS", readers + ":lease:*"})->elements != 0) {  // the server's clock runs them out
+      if (Clock::now() > give_up) return false;
+      std::this_thread::sleep_for(50ms);  // a poll of the server, not a wait for anything of ours
+    }
+    return true;
+  };
+
+  auto full = helper({"block_reader", "held"});
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(publisher.publish(i));  // room for 2: the third is dropped for it
+  ASSERT_TRUE(errors.read_for(5s)) << "the third was dropped for the reader that made no room";
+  auto idle = helper({"block_reader", "held"});  // room to spare
+  ASSERT_EQ(raw.integer({"HLEN", readers}), 3) << "two progress fields and one count of what was dropped";
+  full.kill();
+  idle.kill();
+  ASSERT_TRUE(leases_gone()) << "the dead readers' leases never ran out";
+  ASSERT_TRUE(publisher.publish(3));
+  EXPECT_EQ(raw.integer({"HLEN", readers}), 0) << "the writer struck both dead readers";
+
+  auto another = helper({"block_reader", "held"});
+  another.kill();
+  ASSERT_TRUE(leases_gone());
+  auto reader = core.subscribe<int>("held", {.capacity = 2, .overflow = Overflow::block}).subscribe();
+  EXPECT_EQ(raw.integer({"HLEN", readers}), 1) << "the new reader struck the dead one; its own field is left";
+}
+
 TEST_F(OptimusProcess, AServiceProcessKilledAndRestartedIsFoundAgain) {
   optimus::Core core{options()};
   auto whoami = core.service<int, int>("whoami", {.timeout = 300ms});

@@ -5,8 +5,10 @@
 //   optimus_service_helper <url> <domain> serve          double, add_one, times_ten, whoami, fail
 //   optimus_service_helper <url> <domain> publish <name> waits for "go <n>" lines, publishes n ints each
 //   optimus_service_helper <url> <domain> block_reader <name> a block reader of 2 ints' room that reads nothing
+//   optimus_service_helper <url> <domain> call <name> <ms>    says "ready", then calls the service (int -> int) once
 #include <unistd.h>
 
+#include <chrono>
 #include <iostream>
 #include <stdexcept>
 #include <string>
@@ -40,6 +42,13 @@ int main(int argc, char** argv) {
       while (std::getline(std::cin, line)) {
       }
       return 0;
+    }
+    if (role == "call" && argc >= 6) {
+      auto service = core.service<int, int>(argv[4], {.timeout = std::chrono::milliseconds{std::stoi(argv[5])}});
+      std::cout << "ready" << std::endl;
+      auto answer = service.call(1);
+      std::cout << (answer ? "answered " + std::to_string(*answer) : answer.error().describe()) << std::endl;
+      return answer ? 0 : 1;
     }
     if (role == "publish" && argc >= 5) {
       auto publisher = core.publisher<int>(argv[4], {.capacity = 1000});

@@ -345,6 +345,34 @@ TEST_F(OptimusSource, ABlockReaderHoldsTheWriterBackAcrossCores) {
   EXPECT_EQ(reader.lost(), 0u);
 }
 
+// A `block` reader that reads nothing for longer than its lease is struck
+// off by the next writer (its fields leave the readers hash, with the count
+// of what was dropped for it). Reading again, it registers again and says so.
+TEST_F(OptimusSource, ABlockReaderStruckOffForNotReadingSaysSoWhenItReadsAgain) {
+  optimus::Core core{options()};
+  auto errors = core.errors().subscribe();
+  auto pub = core.publisher<int>("cmds", {.capacity = 4, .overflow = Overflow::block, .block_timeout = 20ms});
+  auto reader = pub.source().subscribe({.capacity = 1, .overflow = Overflow::block});
+  ASSERT_TRUE(pub.publish(1));
+  ASSERT_TRUE(pub.publish(2));  // no room: dropped for it
+  auto dropped = errors.read_for(5s);
+  ASSERT_TRUE(dropped);
+  EXPECT_EQ(dropped->value.code, Errc::overflow) << dropped->value.describe();
+  RawRedis raw{shared_redis().url()};
+  const auto readers = domain + ":readers:cmds";
+  ASSERT_TRUE(eventually([&] { return raw.command({"KEYS", readers + ":lease:*"})->elements == 0; }, 10s))
+      << "the server runs the lease out";
+  ASSERT_TRUE(pub.publish(3));
+  EXPECT_EQ(raw.integer({"HLEN", readers}), 0) << "struck off, with its count";
+  auto first = reader.read_for(5s);
+  ASSERT_TRUE(first) << first.error().describe();
+  EXPECT_EQ(first->value, 1);
+  auto struck = errors.read_for(5s);
+  ASSERT_TRUE(struck) << "reading again, it said it had been struck off";
+  EXPECT_NE(struck->value.message.find("taken for gone"), std::string::npos) << struck->value.describe();
+  EXPECT_EQ(raw.integer({"HLEN", readers}), 1) << "and is registered again";
+}
+
 TEST_F(OptimusSource, ALinkedChainAndACollectorWorkOnAStream) {
   optimus::Core core{options()};
   Event<int> lidar;

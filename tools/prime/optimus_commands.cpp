@@ -20,6 +20,7 @@
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
 #include "prime/optimus/detail/connection.hpp"
+#include "prime/optimus/detail/keys.hpp"
 #include "prime/optimus/detail/stream_protocol.hpp"
 #include "shm_commands.hpp"
 #include "stats.hpp"
@@ -74,7 +75,7 @@ long long integer(Redis& r, const std::vector<std::string>& words) {
 // A source's readers: the "r<id>" fields of its readers hash (a reader that
 // has lost values also has an "l<id>" field there).
 long long readers(Redis& r, const Options& o, const std::string& source) {
-  auto reply = r.command({"HKEYS", o.domain + ":readers:" + source});
+  auto reply = r.command({"HKEYS", prime::optimus::detail::readers_key(o.domain, source)});
   long long n = 0;
   for (std::size_t i = 0; i < reply->elements; ++i)
     if (reply->element[i]->len > 0 && reply->element[i]->str[0] == 'r') ++n;
@@ -92,7 +93,7 @@ struct Endpoints {
 };
 
 Endpoints endpoints(Redis& r, const Options& o) {
-  return {hash(r, o.domain + ":registry:sources"), hash(r, o.domain + ":registry:services")};
+  return {hash(r, prime::optimus::detail::sources_key(o.domain)), hash(r, prime::optimus::detail::services_key(o.domain))};
 }
 
 // The entries appended to a source's stream from now on, one at a time
@@ -158,7 +159,7 @@ int optimus_ls(const Options& o) {
     bool first = true;
     for (const auto& [name, record] : e.sources) {
       out += std::string{first ? "" : ","} + "{\"name\":" + quote(name) + ",\"type\":" + quote(described(record)) +
-             ",\"length\":" + std::to_string(integer(r, {"XLEN", o.domain + ":src:" + name})) + ",\"readers\":" +
+             ",\"length\":" + std::to_string(integer(r, {"XLEN", prime::optimus::detail::stream_key(o.domain, name)})) + ",\"readers\":" +
              std::to_string(readers(r, o, name)) + "}";
       first = false;
     }
@@ -166,7 +167,7 @@ int optimus_ls(const Options& o) {
     first = true;
     for (const auto& [name, record] : e.services) {
       out += std::string{first ? "" : ","} + "{\"name\":" + quote(name) + ",\"types\":" + quote(described(record)) +
-             ",\"alive\":" + (integer(r, {"EXISTS", o.domain + ":svc:" + name + ":alive"}) ? "true" : "false") + "}";
+             ",\"alive\":" + (integer(r, {"EXISTS", prime::optimus::detail::alive_key(prime::optimus::detail::service_key(o.domain, name))}) ? "true" : "false") + "}";
       first = false;
     }
     std::cout << out << "]}\n";
@@ -175,13 +176,13 @@ int optimus_ls(const Options& o) {
   std::cout << "optimus domain " << o.domain << " on " << o.redis << "\n\nSOURCES\n";
   Table sources{{"NAME", "TYPE", "IN STREAM", "READERS"}};
   for (const auto& [name, record] : e.sources)
-    sources.add({name, described(record), std::to_string(integer(r, {"XLEN", o.domain + ":src:" + name})),
+    sources.add({name, described(record), std::to_string(integer(r, {"XLEN", prime::optimus::detail::stream_key(o.domain, name)})),
                  std::to_string(readers(r, o, name))});
   sources.print(std::cout);
   std::cout << "\nSERVICES\n";
   Table services{{"NAME", "TYPES", "ALIVE"}};
   for (const auto& [name, record] : e.services)
-    services.add({name, described(record), integer(r, {"EXISTS", o.domain + ":svc:" + name + ":alive"}) ? "yes" : "no"});
+    services.add({name, described(record), integer(r, {"EXISTS", prime::optimus::detail::alive_key(prime::optimus::detail::service_key(o.domain, name))}) ? "yes" : "no"});
   services.print(std::cout);
   return kOk;
 }
@@ -190,14 +191,14 @@ int optimus_info(const Options& o) {
   Redis r{o.redis};
   const auto e = endpoints(r, o);
   if (auto s = e.sources.find(o.name); s != e.sources.end()) {
-    std::cout << "source " << o.name << "\n  type: " << described(s->second) << "\n  stream: " << o.domain << ":src:" << o.name
-              << "\n  in stream: " << integer(r, {"XLEN", o.domain + ":src:" + o.name})
+    std::cout << "source " << o.name << "\n  type: " << described(s->second) << "\n  stream: " << prime::optimus::detail::stream_key(o.domain, o.name)
+              << "\n  in stream: " << integer(r, {"XLEN", prime::optimus::detail::stream_key(o.domain, o.name)})
               << "\n  readers: " << readers(r, o, o.name) << '\n';
     return kOk;
   }
   if (auto v = e.services.find(o.name); v != e.services.end()) {
     std::cout << "service " << o.name << "\n  types: " << described(v->second) << "\n  alive: "
-              << (integer(r, {"EXISTS", o.domain + ":svc:" + o.name + ":alive"}) ? "yes" : "no") << '\n';
+              << (integer(r, {"EXISTS", prime::optimus::detail::alive_key(prime::optimus::detail::service_key(o.domain, o.name))}) ? "yes" : "no") << '\n';
     return kOk;
   }
   throw Failure{{Errc::not_found, "no source or service '" + o.name + "' in Optimus domain '" + o.domain + "'"}};
@@ -207,7 +208,7 @@ int optimus_watch(const Options& o, const std::string& command) {
   Redis r{o.redis};
   if (!endpoints(r, o).sources.contains(o.name))
     throw Failure{{Errc::not_found, "no source '" + o.name + "' in Optimus domain '" + o.domain + "'"}};
-  StreamTail tail{r, o.domain + ":src:" + o.name};
+  StreamTail tail{r, prime::optimus::detail::stream_key(o.domain, o.name)};
   if (command != "echo")
     return watch(o, command, [&](Clock::duration timeout) -> std::optional<Arrival> {
       auto entry = tail.next(timeout);

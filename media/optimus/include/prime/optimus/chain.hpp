@@ -58,7 +58,7 @@ inline std::expected<std::string, Error> call_segment(const Segment& segment, st
   if (auto fits = connection.fits(payload.size(), [&] { return what() + ": a request"; }); !fits)
     return std::unexpected(std::move(fits.error()));
   const auto id = segment.pool->next_id();
-  const auto reply = reply_key(*segment.pool, id);
+  const auto reply = reply_key(segment.pool->domain(), segment.pool->process_id(), id);
   std::string envelope;
   envelope.reserve(payload.size() + reply.size() + 64);
   const std::span<const std::string> rest{segment.keys.data() + 1, segment.keys.size() - 1};
@@ -70,7 +70,8 @@ inline std::expected<std::string, Error> call_segment(const Segment& segment, st
   const auto wait = seconds_text(remaining);
   if (!connection.set_timeout(remaining + kSocketMargin))
     return std::unexpected(Error{Errc::unreachable, what() + ": cannot set a socket timeout"});
-  connection.append({"RPUSH", segment.keys.front(), envelope});
+  const auto ttl = std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(remaining + kUntakenFor).count());
+  connection.append({"EVAL", kPushScript, "1", segment.keys.front(), envelope, ttl});
   connection.append({"BLPOP", reply, wait});
   const auto stopped = [&] {
     lease->discard();

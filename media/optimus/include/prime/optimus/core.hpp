@@ -51,7 +51,7 @@ class Core : public Runtime, public ChainFactory<Core> {
     if (!lease) throw Failure{lease.error()};
     auto pong = (*lease)->command({"PING"});
     if (!pong) throw Failure{pong.error()};
-    if (detail::is_error(**pong)) throw Failure{detail::server_error(**pong, "redis at " + options_.url)};
+    if (detail::is_error(**pong)) throw Failure{detail::server_error(**pong, "redis at " + pool_->url())};
   }
   Core(const Core&) = delete;
   Core& operator=(const Core&) = delete;
@@ -85,7 +85,7 @@ class Core : public Runtime, public ChainFactory<Core> {
     std::string shown = display_name(graph);
     std::string name = "~" + pool_->process_id() + "/" + std::to_string(pool_->next_id());
     host<I>(name, shown, std::move(block), ServeOptions{});
-    return Chain<I, O>{{detail::Segment{pool_, {detail::service_key(*pool_, name)}, {std::move(shown)}}},
+    return Chain<I, O>{{detail::Segment{pool_, {detail::service_key(pool_->domain(), name)}, {std::move(shown)}}},
                        std::move(graph), options_.call_timeout};
   }
   // Hosts `block` (or a chain of any medium) as the service `name`, for any
@@ -97,7 +97,7 @@ class Core : public Runtime, public ChainFactory<Core> {
     using I = chain_input_t<In, F>;
     static_assert(Block<F, I>, "prime::optimus: a block must be callable as Out(In) and return a value");
     using O = block_output_t<F, I>;
-    detail::register_types(*pool_, detail::services_key(*pool_), name, record<I, O>(), "service '" + name + "'", true);
+    detail::register_types(*pool_, detail::services_key(pool_->domain()), name, record<I, O>(), "service '" + name + "'", true);
     host<I>(name, name, std::move(block), serve_options);
     return service<I, O>(name, {.timeout = options_.call_timeout});
   }
@@ -107,9 +107,9 @@ class Core : public Runtime, public ChainFactory<Core> {
   // other types; a service not (yet) running is an error of each call.
   template <class In, class Out>
   [[nodiscard]] Chain<In, Out> service(std::string name, CallOptions call = {}) {
-    detail::register_types(*pool_, detail::services_key(*pool_), name, record<In, Out>(), "service '" + name + "'", false);
+    detail::register_types(*pool_, detail::services_key(pool_->domain()), name, record<In, Out>(), "service '" + name + "'", false);
     Graph graph = Graph::node(name, "service", "optimus");
-    return Chain<In, Out>{{detail::Segment{pool_, {detail::service_key(*pool_, name)}, {name}}}, std::move(graph),
+    return Chain<In, Out>{{detail::Segment{pool_, {detail::service_key(pool_->domain(), name)}, {name}}}, std::move(graph),
                           call.timeout};
   }
 
@@ -143,7 +143,8 @@ class Core : public Runtime, public ChainFactory<Core> {
   }
 
   [[nodiscard]] const Options& options() const noexcept { return options_; }
-  [[nodiscard]] const std::string& url() const noexcept { return options_.url; }
+  // The server's URL, with the password it may carry as "***".
+  [[nodiscard]] const std::string& url() const noexcept { return pool_->url(); }
 
  private:
   template <class I, class O>
@@ -159,7 +160,7 @@ class Core : public Runtime, public ChainFactory<Core> {
   template <class T>
   std::shared_ptr<detail::StreamState> make_stream(const std::string& name, const Qos& qos, bool write) {
     auto state = std::make_shared<detail::StreamState>(pool_, name, qos, runtime());
-    detail::register_types(*pool_, detail::sources_key(*pool_), name, detail::type_record(Fingerprint::of<T>()),
+    detail::register_types(*pool_, detail::sources_key(pool_->domain()), name, detail::type_record(Fingerprint::of<T>()),
                            "source '" + name + "'", write);
     return state;
   }
@@ -173,7 +174,7 @@ class Core : public Runtime, public ChainFactory<Core> {
   template <class I, class F>
   void host(const std::string& name, std::string shown, F block, const ServeOptions& serve_options) {
     auto shared = std::make_shared<const F>(std::move(block));
-    const auto key = detail::service_key(*pool_, name);
+    const auto key = detail::service_key(pool_->domain(), name);
     if (auto marked = detail::mark_alive(*pool_, {detail::alive_key(key)}); !marked)
       throw Failure{{marked.error().code, "service '" + shown + "': " + marked.error().message}};
     std::scoped_lock lock{services_mutex_};

@@ -8,9 +8,13 @@ namespace prime::optimus {
 
 // How a Core reaches its Redis server, and the domain its keys live in.
 struct Options {
-  // "tcp://host:port" or "unix:///path/to/redis.sock".
+  // "tcp://host:port" or "unix:///path/to/redis.sock"; "tcp://user:password@host:port"
+  // (%-escaped, ":password@" for a password alone) carries credentials, and
+  // errors show it with the password as "***".
   std::string url = "tcp://127.0.0.1:6379";
-  // AUTH: with a password only (requirepass), or as an ACL user. Empty: no AUTH.
+  // AUTH: with a password only (requirepass), or as an ACL user. Empty: no
+  // AUTH, unless the URL carries credentials (not both). A user without a
+  // password is an error: Redis's AUTH always takes one.
   std::string username{};
   std::string password{};
   // Every key this core reads or writes starts with "<domain>:", so several

@@ -26,40 +26,88 @@
 #include <vector>
 
 #include "prime/logic/error.hpp"
+#include "prime/optimus/detail/escape.hpp"
 #include "prime/optimus/options.hpp"
 
 namespace prime::optimus::detail {
 
-// Where a server is, parsed from "tcp://host:port" or "unix:///path".
+// Where a server is, parsed from "tcp://[user[:password]@]host:port" or
+// "unix:///path". User and password are %-escaped in the URL (a '@' in a
+// password is %40).
 struct Endpoint {
   bool unix_socket = false;
   std::string host{};  // tcp
   int port = 0;        // tcp
   std::string path{};  // unix
+  std::optional<std::string> username{};  // tcp, from the URL
+  std::optional<std::string> password{};
+  std::string shown{};  // the URL as errors show it: no password
 };
+
+// `url` with its password (if any) as "***": what messages may show.
+inline std::string without_password(std::string_view url) {
+  if (!url.starts_with("tcp://")) return std::string{url};
+  const auto at = url.rfind('@');
+  if (at == std::string_view::npos) return std::string{url};
+  const auto colon = url.find(':', 6);
+  if (colon == std::string_view::npos || colon > at) return std::string{url};
+  return std::string{url.substr(0, colon)} + ":***" + std::string{url.substr(at)};
+}
 
 inline std::expected<Endpoint, Error> parse_url(std::string_view url) {
   const auto bad = [&](std::string_view why) {
-    return std::unexpected(Error{Errc::unreachable, "optimus: bad server URL '" + std::string{url} + "' (" +
+    return std::unexpected(Error{Errc::unreachable, "optimus: bad server URL '" + without_password(url) + "' (" +
                                                         std::string{why} +
-                                                        "); expected tcp://host:port or unix:///path"});
+                                                        "); expected tcp://[user:password@]host:port or unix:///path"});
   };
   if (url.starts_with("unix://")) {
-    Endpoint e{.unix_socket = true, .path = std::string{url.substr(7)}};
+    Endpoint e{.unix_socket = true, .path = std::string{url.substr(7)}, .shown = std::string{url}};
     if (e.path.empty() || e.path.front() != '/') return bad("the socket path must be absolute");
     return e;
   }
   if (!url.starts_with("tcp://")) return bad("unknown scheme");
+  Endpoint e{.shown = without_password(url)};
   auto rest = url.substr(6);
+  if (const auto at = rest.rfind('@'); at != std::string_view::npos) {
+    const auto userinfo = rest.substr(0, at);
+    const auto colon = userinfo.find(':');
+    e.username = unescaped(userinfo.substr(0, colon));
+    e.password = colon == std::string_view::npos ? std::optional<std::string>{""} : unescaped(userinfo.substr(colon + 1));
+    if (!e.username || !e.password) return bad("a bad %-escape in the user or password");
+    rest = rest.substr(at + 1);
+  }
   const auto colon = rest.rfind(':');
   if (colon == std::string_view::npos || colon == 0) return bad("no host:port");
-  Endpoint e{.host = std::string{rest.substr(0, colon)}};
+  e.host = std::string{rest.substr(0, colon)};
   if (e.host.size() > 2 && e.host.front() == '[' && e.host.back() == ']') e.host = e.host.substr(1, e.host.size() - 2);
   const auto port = rest.substr(colon + 1);
   const auto [end, ec] = std::from_chars(port.data(), port.data() + port.size(), e.port);
   if (ec != std::errc{} || end != port.data() + port.size() || e.port <= 0 || e.port > 65535)
     return bad("the port must be a number in 1..65535");
   return e;
+}
+
+// Who to AUTH as: the options' user and password, or the URL's; none when
+// neither gives any. Redis's AUTH always takes a password (a user created
+// `nopass` takes any), so a user without one is an error, not a connection
+// made without AUTH; and so are credentials given twice.
+struct Credentials {
+  std::string username;
+  std::string password;
+};
+inline std::expected<std::optional<Credentials>, Error> credentials(const Options& options, const Endpoint& endpoint) {
+  const auto wrong = [&](const std::string& why) {
+    return std::unexpected(Error{Errc::unreachable, "redis at " + endpoint.shown + ": " + why});
+  };
+  const bool in_options = !options.username.empty() || !options.password.empty();
+  if (in_options && (endpoint.username || endpoint.password))
+    return wrong("credentials given both in the URL and in the options; give them once");
+  Credentials c = in_options ? Credentials{options.username, options.password}
+                             : Credentials{endpoint.username.value_or(""), endpoint.password.value_or("")};
+  if (c.password.empty() && !c.username.empty())
+    return wrong("a user '" + c.username + "' without a password; Redis's AUTH takes a password (any, for a nopass user)");
+  if (c.password.empty()) return std::optional<Credentials>{};
+  return std::optional<Credentials>{std::move(c)};
 }
 
 struct ReplyDeleter {
@@ -126,23 +174,26 @@ inline constexpr std::size_t kMaxEnvelope = 0xffffffffu;
 class Connection {
  public:
   static std::expected<Connection, Error> open(const Options& options, const Endpoint& endpoint) {
+    const auto& url = endpoint.shown;
+    auto auth = credentials(options, endpoint);
+    if (!auth) return std::unexpected(std::move(auth.error()));
     const auto tv = to_timeval(options.connect_timeout);
     std::unique_ptr<redisContext, ContextDeleter> ctx{
         endpoint.unix_socket ? redisConnectUnixWithTimeout(endpoint.path.c_str(), tv)
                              : redisConnectWithTimeout(endpoint.host.c_str(), endpoint.port, tv)};
-    if (!ctx) return std::unexpected(Error{Errc::unreachable, "redis at " + options.url + ": out of memory"});
+    if (!ctx) return std::unexpected(Error{Errc::unreachable, "redis at " + url + ": out of memory"});
     if (ctx->err)
-      return std::unexpected(Error{Errc::unreachable, "redis at " + options.url + " is unreachable: " + ctx->errstr});
-    Connection c{std::move(ctx), options.url};
+      return std::unexpected(Error{Errc::unreachable, "redis at " + url + " is unreachable: " + ctx->errstr});
+    Connection c{std::move(ctx), url};
     if (!c.set_timeout(options.connect_timeout))
-      return std::unexpected(Error{Errc::unreachable, "redis at " + options.url + ": cannot set a socket timeout"});
-    if (!options.password.empty()) {
-      auto reply = options.username.empty() ? c.command({"AUTH", options.password})
-                                            : c.command({"AUTH", options.username, options.password});
+      return std::unexpected(Error{Errc::unreachable, "redis at " + url + ": cannot set a socket timeout"});
+    if (const auto& who = *auth) {
+      auto reply = who->username.empty() ? c.command({"AUTH", who->password})
+                                         : c.command({"AUTH", who->username, who->password});
       if (!reply) return std::unexpected(std::move(reply.error()));
       if ((*reply)->type == REDIS_REPLY_ERROR)
-        return std::unexpected(Error{Errc::unreachable, "redis at " + options.url + " refused AUTH" +
-                                                            (options.username.empty() ? "" : " as '" + options.username + "'") +
+        return std::unexpected(Error{Errc::unreachable, "redis at " + url + " refused AUTH" +
+                                                            (who->username.empty() ? "" : " as '" + who->username + "'") +
                                                             ": " + std::string{(*reply)->str, (*reply)->len}});
     }
     return c;

@@ -36,6 +36,22 @@ struct Response {
   std::string payload;
 };
 
+// How an envelope goes onto a list (a service's requests, a caller's reply
+// key): appended, and the list made to live at least `ms` more (the
+// request's deadline and kUntakenFor), so what nobody takes (its caller was
+// killed, its service's process died) goes away by itself, and never cuts
+// short a request queued before with a later deadline. One step on the
+// server: the expiry is set only if the append succeeded (a script stops at
+// an error), and the append never stays without one.
+inline constexpr std::string_view kPushFunction = R"lua(
+local function push(key, value, ms)
+  redis.call('RPUSH', key, value)
+  if redis.call('PTTL', key) < tonumber(ms) then redis.call('PEXPIRE', key, ms) end
+end
+)lua";
+// KEYS[1] the list, ARGV[1] the envelope, ARGV[2] ms.
+inline const std::string kPushScript = std::string{kPushFunction} + "push(KEYS[1], ARGV[1], ARGV[2])\nreturn 1\n";
+
 struct StringAppender {
   std::string& out;
   void write(const char* data, std::size_t n) { out.append(data, n); }

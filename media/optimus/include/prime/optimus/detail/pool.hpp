@@ -123,7 +123,7 @@ class Pool : public std::enable_shared_from_this<Pool> {
       std::unique_lock lock{mutex_};
       const auto until = std::min(deadline, std::max(retry_after_, Clock::now() + kFirstBackoff));
       wake_.wait_until(lock, stop, until, [] { return false; });
-      if (stop.stop_requested()) return std::unexpected(Error{Errc::stopped, "redis at " + options_.url + ": stopped while reconnecting"});
+      if (stop.stop_requested()) return std::unexpected(Error{Errc::stopped, "redis at " + url() + ": stopped while reconnecting"});
     }
   }
 
@@ -162,14 +162,11 @@ class Pool : public std::enable_shared_from_this<Pool> {
   }
 
   [[nodiscard]] const Options& options() const noexcept { return options_; }
-  [[nodiscard]] const std::string& url() const noexcept { return options_.url; }
+  // The server's URL as messages show it (no password).
+  [[nodiscard]] const std::string& url() const noexcept { return endpoint_.shown; }
 
-  // "<domain>:" followed by `name`: the only keys this medium touches.
-  [[nodiscard]] std::string key(std::string_view kind, std::string_view name) const {
-    std::string k;
-    k.reserve(options_.domain.size() + kind.size() + name.size() + 2);
-    return k.append(options_.domain).append(":").append(kind).append(name);
-  }
+  // The prefix of every key this pool's users touch (keys.hpp).
+  [[nodiscard]] const std::string& domain() const noexcept { return options_.domain; }
 
   // The server's clock now, in ms since the epoch: this machine's system
   // clock and how far the server's is ahead of it, which the pool measures

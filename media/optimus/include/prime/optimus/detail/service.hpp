@@ -43,25 +43,41 @@ std::expected<std::string, Error> run_block(const F& block, std::string_view pay
 
 // Hands a linked call's request on to the next service (KEYS[1], its
 // request key) if a worker of it lives (KEYS[2], its alive key); else
-// answers the caller at once (KEYS[3], its reply key) with ARGV[2], which
-// expires after ARGV[3] ms. One round trip, pipelined as an RPUSH would be.
-inline constexpr std::string_view kForwardScript = R"lua(
+// answers the caller at once (KEYS[3], its reply key) with ARGV[2]. Either
+// list lives ARGV[3] ms more at least (kPushFunction). One round trip,
+// pipelined as an RPUSH would be.
+inline const std::string kForwardScript = std::string{kPushFunction} + R"lua(
 if redis.call('EXISTS', KEYS[2]) == 1 then
-  return redis.call('RPUSH', KEYS[1], ARGV[1])
+  push(KEYS[1], ARGV[1], ARGV[3])
+  return 1
 end
-redis.call('RPUSH', KEYS[3], ARGV[2])
-redis.call('PEXPIRE', KEYS[3], ARGV[3])
+push(KEYS[3], ARGV[2], ARGV[3])
 return 0
 )lua";
+
+// Why a request may not be followed, if it names a key a worker must not
+// write: an answer goes only to one of the domain's reply keys, and a
+// linked call is handed on only to one of its services. Whoever can write a
+// domain's request keys writes requests, and a worker may have rights
+// beyond its domain; so a request never chooses where the worker writes.
+inline std::optional<std::string> foreign_key(std::string_view domain, const Request& request) {
+  if (!is_reply_key(domain, request.reply_key))
+    return "reply key " + shown_key(request.reply_key) + " is not a caller's reply key of domain '" + std::string{domain} + "'";
+  for (const auto& next : request.route)
+    if (!service_name(domain, next))
+      return "next service key " + shown_key(next) + " is not a service's request key of domain '" + std::string{domain} + "'";
+  return std::nullopt;
+}
 
 // One worker of a service: waits on the request key, runs the block, and
 // sends the result on (the next service of the request's route) or back (the
 // caller's reply key). Runs until `stop`; rides out a lost server by
 // reconnecting with backoff, and a server that refuses its wait (a key of
 // another type, a server still loading, an ACL) by asking again after a
-// backoff of its own, reporting the server's error each time. What it sends
-// is pipelined with its next wait, so a busy worker makes one round trip per
-// request.
+// backoff of its own, reporting the server's error each time. A request
+// that names a key the worker must not write (foreign_key) is dropped and
+// reported. What it sends is pipelined with its next wait, so a busy worker
+// makes one round trip per request.
 template <class In, class F>
 void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, const std::string& key,
                     const F& block, const std::weak_ptr<prime::detail::RuntimeState>& runtime, std::stop_token stop) {
@@ -75,7 +91,7 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
   // A key of this worker's own that it also waits on: a stop pushes to it,
   // which ends the wait without cutting it, so a request the server handed
   // out meanwhile still arrives, and is answered.
-  const auto wake = pool->key("wake:", pool->process_id() + ":" + std::to_string(pool->next_id()));
+  const auto wake = wake_key(pool->domain(), pool->process_id(), pool->next_id());
   const auto push_wake = [&] {
     auto lease = pool->acquire();
     if (!lease || !(*lease)->set_timeout(std::chrono::microseconds{pool->options().connect_timeout})) return false;
@@ -137,6 +153,10 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
         report({Errc::type_mismatch, where + ": request key '" + key + "' held " + request.error() + "; dropped"});
         continue;
       }
+      if (auto foreign = foreign_key(pool->domain(), *request)) {
+        report({Errc::damaged, where + ": a request in '" + key + "' names " + *foreign + "; dropped"});
+        continue;
+      }
       if (request->deadline_ms != 0 &&
           pool->server_ms() > request->deadline_ms)
         continue;  // its caller has given up: running it would answer nobody
@@ -146,15 +166,14 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
           result = std::unexpected(std::move(fits.error()));
       // An answer nobody takes (its caller gave up) goes away by itself.
       const auto left = request->deadline_ms - pool->server_ms();
-      const auto ttl = std::to_string(std::max<std::int64_t>(left, 0) + 10'000);
+      const auto ttl = std::to_string(std::max<std::int64_t>(left, 0) + kUntakenFor.count());
       if (result && !request->route.empty()) {
         const auto& next = request->route.front();
         std::string forwarded;
         forwarded.reserve(result->size() + request->reply_key.size() + 64);
         const std::span<const std::string> rest{request->route.data() + 1, request->route.size() - 1};
         encode_request(request->id, request->reply_key, rest, request->deadline_ms, *result, forwarded);
-        const auto prefix = service_key(*pool, "");
-        const auto next_name = next.starts_with(prefix) ? next.substr(prefix.size()) : next;
+        const auto next_name = service_name(pool->domain(), next).value_or(next);  // checked above
         if (auto fits = connection.fits(forwarded.size(), [&] { return where + ": its output for '" + next_name + "'"; });
             !fits) {
           result = std::unexpected(std::move(fits.error()));  // said to the caller instead
@@ -163,7 +182,7 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
           encode_response(request->id, Errc::peer_dead,
                           "service '" + next_name + "': no live worker serves it (next after '" + name + "' in a linked call)",
                           {}, refused);
-          outbox.push_back({"EVAL", std::string{kForwardScript}, "3", next, alive_key(next), request->reply_key,
+          outbox.push_back({"EVAL", kForwardScript, "3", next, alive_key(next), request->reply_key,
                             std::move(forwarded), std::move(refused), ttl});
           continue;
         }
@@ -177,8 +196,7 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
         }
       }
       if (!result) encode_response(request->id, result.error().code, result.error().message, {}, response);
-      outbox.push_back({"RPUSH", request->reply_key, std::move(response)});
-      outbox.push_back({"PEXPIRE", request->reply_key, ttl});
+      outbox.push_back({"EVAL", kPushScript, "1", request->reply_key, std::move(response), ttl});
     }
     if (stop.stop_requested()) {
       lease->discard();

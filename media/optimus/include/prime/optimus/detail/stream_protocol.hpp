@@ -36,10 +36,13 @@ namespace prime::optimus::detail {
 // epoch of its last entry (a new one, the server's time, when it has none).
 // The stream is trimmed to exactly ARGV[1] entries. Mode ARGV[4]: "drop"
 // appends; "wait" appends only if every registered reader has room and
-// otherwise returns {0, full}; "force" appends and marks the full readers.
-// A full reader whose lease (the key ARGV[5] .. id) has run out is gone: a
-// process that died, or one that has not read for kReaderLease. It is
-// struck from the readers, not waited for, until it reads again.
+// otherwise returns {0, full}; "force" appends and marks the full readers;
+// "sweep" appends nothing (a reader subscribing: below).
+// A reader whose lease (the key ARGV[5] .. id) has run out is gone: a
+// process that died, or one that has not read for kReaderLease. Every mode
+// but "drop" strikes its fields from the readers hash, so that killed
+// readers leave nothing behind (fields have no TTL of their own), and no
+// writer waits for them; a gone reader that reads again registers again.
 //   KEYS: stream, readers hash.  ARGV: maxlen, stamp, message, mode, lease prefix.
 // The readers hash holds, per reader id, "r<id>" = reader_progress() and
 // "l<id>" = how many values were dropped for it.
@@ -57,18 +60,15 @@ local full = {}
 if ARGV[4] ~= 'drop' then
   local readers = redis.call('HGETALL', KEYS[2])
   for i = 1, #readers, 2 do
-    if string.sub(readers[i], 1, 1) == 'r' then
+    local id = string.sub(readers[i], 2)
+    if redis.call('EXISTS', ARGV[5] .. id) == 0 then
+      redis.call('HDEL', KEYS[2], readers[i])
+    elseif string.sub(readers[i], 1, 1) == 'r' then
       local cursor, capacity = string.match(readers[i + 1], '^(%d+) (%d+)$')
-      local id = string.sub(readers[i], 2)
-      if cursor and n - tonumber(cursor) > tonumber(capacity) then
-        if redis.call('EXISTS', ARGV[5] .. id) == 1 then
-          full[#full + 1] = id
-        else
-          redis.call('HDEL', KEYS[2], readers[i])
-        end
-      end
+      if cursor and n - tonumber(cursor) > tonumber(capacity) then full[#full + 1] = id end
     end
   end
+  if ARGV[4] == 'sweep' then return {0, 0} end
   if #full > 0 and ARGV[4] == 'wait' then return {0, #full} end
 end
 if #full > 0 then
@@ -84,6 +84,7 @@ return {1, #full}
 inline constexpr std::string_view kAppendDrop = "drop";
 inline constexpr std::string_view kAppendWait = "wait";
 inline constexpr std::string_view kAppendForce = "force";
+inline constexpr std::string_view kSweepOnly = "sweep";
 
 inline std::int64_t stamp_ns(Clock::time_point t) {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count();
@@ -126,8 +127,9 @@ inline std::optional<std::uint64_t> epoch_from_time(const redisReply& time) {
 // A reader's fields in the readers hash.
 inline std::string reader_field(std::string_view reader_id) { return "r" + std::string{reader_id}; }
 // A `block` reader's lease: a key that lives kReaderLease after the reader
-// last read or waited (each refreshes it). Writers stop waiting for a
-// reader whose lease ran out; the reader's next read registers it again.
+// last read or waited (each refreshes it). Writers strike a reader whose
+// lease ran out from the readers hash; the reader's next read registers it
+// again.
 inline constexpr std::chrono::milliseconds kReaderLease{3000};
 inline std::string lease_prefix(std::string_view readers_key) { return std::string{readers_key} + ":lease:"; }
 inline std::string lease_key(std::string_view readers_key, std::string_view reader_id) {

@@ -60,13 +60,9 @@ class StreamReader final : public Reader<T>::Impl {
       }
     }
     if (block_) {
+      if (auto swept = state_->sweep_readers(c); !swept) throw Failure{swept.error()};
       register_progress(c);
-      for (int i = 0; i < 2; ++i) {
-        auto registered = c.reply();
-        if (!registered) throw Failure{state_->named(registered.error())};
-        if (is_error(**registered))
-          throw Failure{server_error(**registered, "source '" + state_->name() + "': registering a block reader")};
-      }
+      if (auto registered = registration_replies(c); !registered) throw Failure{registered.error()};
     }
   }
   StreamReader(const StreamReader&) = delete;
@@ -132,22 +128,31 @@ class StreamReader final : public Reader<T>::Impl {
 
   std::string progress() const { return reader_progress(last_.seq, capacity_); }
 
-  // A `block` reader's registration, sent before each read or wait: how far
-  // it has read, and its lease renewed (writers stop waiting for a reader
-  // whose lease ran out: it died, or stopped reading).
+  // A `block` reader's registration, sent before each read or wait: its
+  // lease renewed (writers strike a reader whose lease ran out: it died, or
+  // stopped reading), then how far it has read. In that order, so a writer
+  // never finds the progress without the lease.
   void register_progress(Connection& c) const {
     static const std::string lease_ms = std::to_string(kReaderLease.count());
-    c.append({"HSET", state_->readers_key(), reader_field_, progress()});
     c.append({"SET", lease_key_, "1", "PX", lease_ms});
+    c.append({"HSET", state_->readers_key(), reader_field_, progress()});
   }
-  // Their two replies; an error names the source.
-  std::expected<void, Error> registration_replies(Connection& c) const {
+  // Their two replies; an error names the source. A progress field that is
+  // new after the first says a writer struck this reader (it read nothing
+  // for kReaderLease): writers did not wait for it meanwhile, and the count
+  // of what they dropped for it went with its fields. Said, not hidden.
+  std::expected<void, Error> registration_replies(Connection& c) {
     for (int i = 0; i < 2; ++i) {
       auto registered = c.reply();
       if (!registered) return std::unexpected(state_->named(registered.error()));
       if (is_error(**registered))
         return std::unexpected(server_error(**registered, "source '" + state_->name() + "': registering a block reader"));
+      if (i == 1 && registered_ && (**registered).type == REDIS_REPLY_INTEGER && (**registered).integer == 1)
+        state_->report({Errc::overflow, "source '" + state_->name() + "': a block reader read nothing for " +
+                                            std::to_string(kReaderLease.count()) +
+                                            " ms and was taken for gone; registered again, it may have lost values not counted by lost()"});
     }
+    registered_ = true;
     return {};
   }
   Error stopped() const { return {Errc::stopped, "source '" + state_->name() + "': the reader was stopped"}; }
@@ -251,6 +256,7 @@ class StreamReader final : public Reader<T>::Impl {
   std::string lease_key_;
   std::string capacity_;
   std::string cursor_ = "0-0";
+  bool registered_ = false;  // a `block` reader, once it has registered
   EntryId last_;  // of the last entry read (or the newest when subscribing)
   std::uint64_t lost_ = 0;
   std::deque<Sample<T>> cache_;

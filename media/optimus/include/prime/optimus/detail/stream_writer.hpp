@@ -41,8 +41,8 @@ class StreamState {
   StreamState(std::shared_ptr<Pool> pool, std::string name, Qos qos, std::weak_ptr<prime::detail::RuntimeState> runtime)
       : pool_{std::move(pool)},
         name_{std::move(name)},
-        key_{stream_key(*pool_, name_)},
-        readers_key_{detail::readers_key(*pool_, name_)},
+        key_{stream_key(pool_->domain(), name_)},
+        readers_key_{detail::readers_key(pool_->domain(), name_)},
         qos_{qos},
         runtime_{std::move(runtime)},
         maxlen_{std::to_string(stream_length(qos))} {
@@ -199,6 +199,15 @@ class StreamState {
     std::vector<Message> again;
     for (const auto i : got->refused) again.push_back(std::move(batch[i]));
     return append_again(f, again);
+  }
+
+  // Strikes the readers whose leases ran out from the readers hash, as a
+  // writer waiting for readers does: for a `block` reader subscribing, so
+  // that a source whose writers never wait keeps no dead readers either.
+  std::expected<void, Error> sweep_readers(Connection& c) {
+    auto done = run_script(c, {maxlen_, "0", "", kSweepOnly});
+    if (!done) return std::unexpected(std::move(done.error()));
+    return {};
   }
 
   [[nodiscard]] std::chrono::microseconds command_timeout() const {
