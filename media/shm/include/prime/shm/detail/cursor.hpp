@@ -414,7 +414,7 @@ class Cursor {
     const auto ahead = RingEntry::ahead(entry, next_);
     const auto seq = next_ + static_cast<std::uint64_t>(ahead);
     if ((ahead == 0 && RingEntry::chunk(entry) != kNoChunk && !topic_->places().names_chunk(entry)) ||
-        (ahead > 0 && (static_cast<std::uint64_t>(ahead) % capacity != 0 || seq >= head + capacity)))
+        (ahead > 0 && (static_cast<std::uint64_t>(ahead) % capacity != 0 || (seq >= head && seq - head >= capacity))))
       note_damage(entry, ahead, head);
     const auto to = std::max(next_ + 1, head > capacity ? head - capacity : 0);
     if (to > head) return false;
