@@ -115,6 +115,18 @@ TEST(BoundarySegments, ASegmentOfAnotherUserOrWithAWiderModeIsRefused) {
   ::unlink(registry.c_str());
 }
 
+// A domain whose registry's name would be shortened with a hash (tools
+// could not read it back from /dev/shm) is refused, as is a name holding a
+// NUL (never found again in the registry: a new entry on every open).
+TEST(BoundaryNames, ADomainTooLongToReadBackAndANameWithANulAreRefused) {
+  EXPECT_TRUE(fails_with([] { shm::Core core{unique_domain("long") + std::string(220, 'x')}; }, Errc::limit_exceeded,
+                         "too long (2"));
+  shm::Core core{unique_domain("nul")};
+  const std::string with_nul{"a\0b", 3};
+  EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>(with_nul); }, Errc::limit_exceeded, "no control character"));
+  EXPECT_TRUE(core.registry().topics.empty());
+}
+
 // bounded_string and bounded_vector read within their capacity whatever
 // count the bytes hold (another process wrote them).
 TEST(BoundaryMessages, BoundedTypesNeverReadPastTheirCapacity) {

@@ -11,8 +11,6 @@
 #include <cmath>
 #include <csignal>
 #include <cstring>
-#include <filesystem>
-#include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <map>
@@ -141,54 +139,26 @@ std::shared_ptr<const Layout> layout_to_show(const std::string& schema, std::siz
   return nullptr;
 }
 
-// shm::domains(), and the domains it cannot see. Past 200 characters a
-// segment's name is shortened with a hash ("prime.<its start>#<hash>"), so
-// a long domain's name cannot be read back from /dev/shm: its registry is
-// known by its magic number, and listed by the start of its name, with how
-// to reach it.
-std::vector<shm::DomainSummary> all_domains() {
-  auto found = shm::domains();
-  std::error_code ignored;
-  for (const auto& entry : std::filesystem::directory_iterator{shm::detail::kShmDirectory, ignored}) {
-    const auto file = entry.path().filename().string();
-    const auto hash = file.rfind('#');
-    if (!file.starts_with("prime.") || hash == std::string::npos ||
-        entry.symlink_status(ignored).type() != std::filesystem::file_type::regular)  // no FIFO to block on
-      continue;
-    std::uint64_t magic = 0;
-    std::ifstream in{entry.path(), std::ios::binary};
-    if (!in.read(reinterpret_cast<char*>(&magic), sizeof magic) || magic != shm::detail::kRegistryMagic) continue;
-    const auto start = file.substr(6, std::min(hash, file.find('.', 6)) - 6);  // an escaped name has no '.'
-    found.push_back({.name = shm::detail::unescape(start) + "...",
-                     .unreadable = "its name is too long to read back from " + file +
-                                   " in /dev/shm: --domain with its full name reaches it"});
-  }
-  std::ranges::sort(found, {}, &shm::DomainSummary::name);
-  return found;
-}
-
-// shm::clean says "removed <path>" of each segment it tried to remove: one
-// still there it did not remove, and this says so, with why (/dev/shm lets
-// only a file's owner remove it). Nothing for any other line.
+// A line of shm::clean's that says a segment stayed, with why; and, where
+// the reason is that another user owns it (only a file's owner may remove
+// it from /dev/shm), who that is. Nothing for any other line.
 std::optional<std::string> failed_removal(const std::string& line) {
-  const std::string removed = "removed ";
-  if (!line.starts_with(removed)) return std::nullopt;
-  const auto path = line.substr(removed.size());
+  const std::string failed = "could not remove ";
+  if (!line.starts_with(failed)) return std::nullopt;
+  const auto path = line.substr(failed.size(), line.find(": ") - failed.size());
   struct stat st {};
-  if (::lstat(path.c_str(), &st) != 0) return std::nullopt;
-  if (st.st_uid == ::geteuid()) return "could not remove " + path + ": it is still there";
+  if (::lstat(path.c_str(), &st) != 0 || st.st_uid == ::geteuid()) return line;
   passwd entry{};
   passwd* user = nullptr;
   char text[1024];
   const std::string name = ::getpwuid_r(st.st_uid, &entry, text, sizeof text, &user) == 0 && user ? user->pw_name : "?";
-  return "could not remove " + path + ": it belongs to user " + name + " (uid " + std::to_string(st.st_uid) +
-         "), and only a file's owner may remove it";
+  return line + " (it belongs to user " + name + ", uid " + std::to_string(st.st_uid) + ")";
 }
 
 }  // namespace
 
 int shm_domains(const Options& o) {
-  const auto found = all_domains();
+  const auto found = shm::domains();
   if (o.json) {
     std::string out = "[";
     for (std::size_t i = 0; i < found.size(); ++i) {
@@ -460,7 +430,7 @@ int shm_graph(const Options& o) {
 int shm_clean(const Options& o) {
   std::vector<std::string> domains;
   if (o.all) {
-    for (const auto& d : all_domains())
+    for (const auto& d : shm::domains())
       if (d.unreadable.empty()) domains.push_back(d.name);
       else std::cerr << "prime: left domain '" << d.name << "' alone: " << d.unreadable << '\n';
   } else {

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cstring>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -64,12 +65,15 @@ struct DomainSummary {
 // What dead participants left in `domain`: of a domain no one lives in,
 // every segment (removed); of a live one, their registry entries and slots
 // (freed: nothing of a live participant is touched). Says what it did, a
-// line each; nothing when there was nothing to do.
+// line each ("removed <path>"; "could not remove <path>: <why>" for a
+// segment that stayed); nothing when there was nothing to do.
 inline std::vector<std::string> clean(const std::string& domain) {
   auto registry = detail::Registry::watch(domain);
   if (!registry) return {};
   std::vector<std::string> done;
-  for (auto& removed : registry->remove_if_dead()) done.push_back("removed /dev/shm/" + removed);
+  for (const auto& [name, error] : registry->remove_if_dead())
+    done.push_back(error == 0 ? "removed /dev/shm/" + name
+                              : "could not remove /dev/shm/" + name + ": " + std::strerror(error));
   if (!done.empty()) return done;
   const auto before = registry->participants();
   // Slots are cleared by a participant, whose lease tells the others it is

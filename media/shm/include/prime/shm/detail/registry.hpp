@@ -77,6 +77,12 @@ class Registry : public std::enable_shared_from_this<Registry> {
   static std::shared_ptr<Registry> join(const std::string& domain, const Access& access, const std::string& name,
                                         bool only_if_alive = false) {
     if (domain.empty()) throw Failure{{Errc::limit_exceeded, "shm: a domain needs a name"}};
+    // Its registry's name must read back as the domain (tools find domains
+    // by it): one shortened with a hash could not.
+    if (const auto name = segment_name(domain, "registry", ""); name.find('#') != std::string::npos)
+      throw Failure{{Errc::limit_exceeded, "shm domain '" + domain.substr(0, 40) + "...': too long (" +
+                                               std::to_string(domain.size()) +
+                                               " characters; escaped, its registry's name must stay within 200)"}};
     if ((access.permissions & ~0666u) != 0)
       throw Failure{{Errc::limit_exceeded, "shm domain '" + domain + "': permissions are read and write bits (at most 0666)"}};
     while (true) {
@@ -156,6 +162,11 @@ class Registry : public std::enable_shared_from_this<Registry> {
     if (name.empty()) throw Failure{{Errc::limit_exceeded, "shm: a " + std::string{kind_name(kind)} + " needs a name"}};
     if (name.size() >= kNameCapacity)
       throw Failure{{Errc::limit_exceeded, what + ": names are at most " + std::to_string(kNameCapacity - 1) + " characters"}};
+    // The table keeps names as text ending in a NUL: one holding a NUL or
+    // another control character would never be found again, and take a
+    // new entry on every open.
+    if (std::any_of(name.begin(), name.end(), [](char c) { return static_cast<unsigned char>(c) < 0x20 || c == 0x7f; }))
+      throw Failure{{Errc::limit_exceeded, std::string{kind_name(kind)} + " names hold no control character (a NUL, a newline...)"}};
     Locked lock{*this};
     auto& r = layout();
     std::size_t free = kMaxEndpoints;
@@ -204,19 +215,22 @@ class Registry : public std::enable_shared_from_this<Registry> {
     return list;
   }
 
+  // A segment removed, or not (`error`: the errno that kept it).
+  struct Removal {
+    std::string name;
+    int error = 0;
+  };
   // When no participant of the domain lives: removes every segment of it
-  // and returns their names (a dead domain's remains); otherwise nothing.
-  std::vector<std::string> remove_if_dead() {
+  // and says how each went (a dead domain's remains); otherwise nothing.
+  std::vector<Removal> remove_if_dead() {
     Locked lock{*this};
     auto& r = layout();
     if (std::any_of(std::begin(r.participants), std::end(r.participants), [this](const auto& p) { return alive(p.id.load()); }))
       return {};
-    std::vector<std::string> removed;
+    std::vector<Removal> removed;
     for (auto& e : r.endpoints)
-      if (e.used) removed.push_back(segment_name(domain_, kind_name(e.kind), read_text(e.name)));
-    for (auto& e : r.endpoints) forget(e);
-    removed.push_back(segment_.name());
-    remove_registry();
+      if (e.used) removed.push_back({segment_name(domain_, kind_name(e.kind), read_text(e.name)), forget(e)});
+    removed.push_back({segment_.name(), remove_registry()});
     return removed;
   }
 
@@ -319,9 +333,10 @@ class Registry : public std::enable_shared_from_this<Registry> {
   // magic, so a participant killed between the two leaves nothing behind,
   // not a registry no tool sees; one that opened it before the removal
   // finds the name gone, or the magic (enter).
-  void remove_registry() {
-    Segment::remove(segment_.name());
+  int remove_registry() {
+    const int error = Segment::remove(segment_.name());
     layout().magic.store(0);
+    return error;
   }
 
   // The table lock: one thread of this process (the mutex) and one
@@ -346,11 +361,13 @@ class Registry : public std::enable_shared_from_this<Registry> {
   static std::size_t slot_of(ParticipantId id) { return static_cast<std::size_t>(id & ((1u << kSlotBits) - 1)) - 1; }
   static off_t lease_byte(std::size_t slot) { return static_cast<off_t>(1 + slot); }
 
-  void forget(RegistryLayout::Endpoint& e) {
-    if (!e.used) return;
-    Segment::remove(segment_name(domain_, kind_name(e.kind), read_text(e.name)));
+  // Removes entry `e`'s segment and forgets it; 0, or the errno that kept the segment.
+  int forget(RegistryLayout::Endpoint& e) {
+    if (!e.used) return 0;
+    const int error = Segment::remove(segment_name(domain_, kind_name(e.kind), read_text(e.name)));
     e.used = 0;
     e.name[0] = '\0';
+    return error;
   }
 
   template <std::size_t N>

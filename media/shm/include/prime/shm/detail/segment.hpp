@@ -1,5 +1,6 @@
 #pragma once
 
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <sys/statvfs.h>
 
@@ -123,7 +124,11 @@ class Segment {
     }
   }
 
-  static void remove(const std::string& name) noexcept { bip::shared_memory_object::remove(name.c_str()); }
+  // Removes the segment `name`; 0, or why not (an errno: only its owner may
+  // remove a file of /dev/shm). One already gone counts as removed.
+  static int remove(const std::string& name) noexcept {
+    return ::shm_unlink(name.c_str()) == 0 || errno == ENOENT ? 0 : errno;
+  }
 
   // Removes this segment's name, if it still leads here, holding the
   // segment's set-up lock: several openers that found it outdated remove it
