@@ -521,6 +521,30 @@ TEST(PrimeTool, ObservingABlockTopicNeverSlowsItsPublisher) {
 
 // ls, and hz, bw, delay and echo on a source, as on a shared-memory topic
 // (the figures and --json are the same code for both).
+// Credentials reach a server that asks for them from the URL, or from the
+// environment (off the command line, where `ps` shows it); no output ever
+// shows the password.
+TEST(PrimeTool, OptimusCredentialsComeFromTheUrlOrTheEnvironmentAndAreNeverShown) {
+  RedisServer locked{{.extra = {"--requirepass", "s3cret"}}};
+  const auto domain = unique_domain("tool-auth");
+  const auto with_password = "tcp://:s3cret@127.0.0.1:" + std::to_string(locked.port());
+  optimus::Core core{optimus::Options{.url = with_password, .domain = domain}};
+  auto ticks = core.publisher<int>("ticks");
+  const auto by_url = prime(domain, {"--redis", with_password, "ls"});
+  EXPECT_EQ(by_url.code, 0) << by_url.out;
+  EXPECT_NE(by_url.out.find("ticks"), std::string::npos) << by_url.out;
+  const auto by_environment =
+      finished({"env", "PRIME_REDIS_PASSWORD=s3cret", PRIME_TOOL_PATH, "--domain", domain, "--redis", locked.url(), "ls"});
+  EXPECT_EQ(by_environment.code, 0) << by_environment.out;
+  EXPECT_NE(by_environment.out.find("ticks"), std::string::npos) << by_environment.out;
+  const auto without = prime(domain, {"--redis", locked.url(), "ls"});
+  EXPECT_NE(without.code, 0) << without.out;
+  const auto elsewhere = prime(domain + "-none", {"--redis", with_password, "ls"});
+  EXPECT_NE(elsewhere.code, 0) << elsewhere.out;
+  for (const auto* run : {&by_url, &by_environment, &without, &elsewhere})
+    EXPECT_EQ(run->out.find("s3cret"), std::string::npos) << "the password is shown: " << run->out;
+}
+
 TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndTheWatchCommandsReadASource) {
   RedisServer server;
   const auto domain = unique_domain("tool-optimus");

@@ -82,7 +82,9 @@ int main(int argc, char** argv) {
   Options o;
   if (const char* env = std::getenv("PRIME_DOMAIN"); env && *env) o.domain = env;
   app.add_option("--domain", o.domain, "the domain (default: $PRIME_DOMAIN, or robot)");
-  app.add_option("--redis", o.redis, "look at an Optimus domain on this Redis server (tcp://host:port or unix:///path) instead");
+  app.add_option("--redis", o.redis,
+                 "look at an Optimus domain on this Redis server (tcp://[user:password@]host:port or unix:///path) "
+                 "instead; or credentials from $PRIME_REDIS_USER and $PRIME_REDIS_PASSWORD");
   app.add_flag("--json", o.json, "one JSON document (listings) or one per line (streams), for scripts");
   std::function<int()> run;
   const bool redis = [&] {

@@ -4,6 +4,7 @@
 #include <charconv>
 #include <chrono>
 #include <cstdint>
+#include <cstdlib>
 #include <deque>
 #include <iostream>
 #include <map>
@@ -48,10 +49,18 @@ class Redis {
   }
 
  private:
+  // Credentials come in the URL (tcp://user:password@host:port), or, kept
+  // off the command line (where `ps` shows them), from PRIME_REDIS_USER and
+  // PRIME_REDIS_PASSWORD.
   static prime::optimus::detail::Connection open(const std::string& url) {
     const auto endpoint = prime::optimus::detail::parse_url(url);
     if (!endpoint) throw Failure{endpoint.error()};
-    auto connection = prime::optimus::detail::Connection::open({.url = url}, *endpoint);
+    prime::optimus::Options options{.url = url};
+    if (const char* password = std::getenv("PRIME_REDIS_PASSWORD"); password && *password) {
+      options.password = password;
+      if (const char* user = std::getenv("PRIME_REDIS_USER"); user && *user) options.username = user;
+    }
+    auto connection = prime::optimus::detail::Connection::open(options, *endpoint);
     if (!connection) throw Failure{connection.error()};
     return std::move(*connection);
   }
@@ -153,7 +162,8 @@ int optimus_ls(const Options& o) {
   Redis r{o.redis};
   const auto e = endpoints(r, o);
   if (e.sources.empty() && e.services.empty())
-    throw Failure{{Errc::not_found, "no Optimus domain '" + o.domain + "' on " + o.redis + " (no source or service registered)"}};
+    throw Failure{{Errc::not_found, "no Optimus domain '" + o.domain + "' on " +
+                                        prime::optimus::detail::without_password(o.redis) + " (no source or service registered)"}};
   if (o.json) {
     std::string out = "{\"domain\":" + quote(o.domain) + ",\"sources\":[";
     bool first = true;
@@ -173,7 +183,7 @@ int optimus_ls(const Options& o) {
     std::cout << out << "]}\n";
     return kOk;
   }
-  std::cout << "optimus domain " << o.domain << " on " << o.redis << "\n\nSOURCES\n";
+  std::cout << "optimus domain " << o.domain << " on " << prime::optimus::detail::without_password(o.redis) << "\n\nSOURCES\n";
   Table sources{{"NAME", "TYPE", "IN STREAM", "READERS"}};
   for (const auto& [name, record] : e.sources)
     sources.add({name, described(record), std::to_string(integer(r, {"XLEN", prime::optimus::detail::stream_key(o.domain, name)})),
