@@ -56,7 +56,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     while (true) {  // a sample overwritten between the wait and the take sends it back to waiting
       if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
       if (auto sample = take()) return std::move(*sample);
-      if (auto damage = subscriber_->cursor().take_damage()) return std::unexpected(std::move(*damage));
+      if (auto why = why_nothing(deadline, stop)) return std::unexpected(std::move(*why));
     }
   }
 
@@ -79,7 +79,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
         budget_reported_ = false;
         return n;
       }
-      if (auto damage = subscriber_->cursor().take_damage()) return std::unexpected(std::move(*damage));
+      if (auto why = why_nothing(deadline, stop)) return std::unexpected(std::move(*why));
     }
   }
 
@@ -90,7 +90,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
     while (true) {
       if (auto ready = wait(deadline, stop); !ready) return std::unexpected(std::move(ready.error()));
       if (auto views = take_views(max); !views.empty()) return views;
-      if (auto damage = subscriber_->cursor().take_damage()) return std::unexpected(std::move(*damage));
+      if (auto why = why_nothing(deadline, stop)) return std::unexpected(std::move(*why));
     }
   }
   // What is published now, up to `max`: an empty batch when nothing is (or
@@ -148,6 +148,18 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   static Sample<View<T>> sample(View<T> view) {
     const auto stamp = view.stamp();
     return {std::move(view), stamp};
+  }
+
+  // Why a take found nothing though a wait said a sample was out, if that
+  // ends the read: damage in the ring, a stop, or the deadline (a wait
+  // returns at once while the ring's entry says a sample is out). Nothing:
+  // a sample overwritten meanwhile, and the read waits again.
+  std::optional<Error> why_nothing(Clock::time_point deadline, const std::stop_token& stop) {
+    if (auto damage = subscriber_->cursor().take_damage()) return damage;
+    const auto& name = subscriber_->topic().name();
+    if (stop.stop_requested()) return Error{Errc::stopped, "source '" + name + "': stopped while waiting"};
+    if (Clock::now() >= deadline) return Error{Errc::timeout, "source '" + name + "': nothing published in time"};
+    return std::nullopt;
   }
 
   void report_budget() {

@@ -400,13 +400,14 @@ class Cursor {
   // The next sample was not there to take: overwritten before it was
   // taken (lost to us), or its ring entry is damaged. Skips to the oldest
   // still in the ring, never past the head: false when there is nothing to
-  // skip to (a publish half-way, or an entry naming a sample the head says
-  // is not out), so a ring of forged entries is never walked on and on.
+  // skip to, so a ring of forged entries is never walked on and on.
   //
   // A publisher stores a batch's entries (at most a ring's worth) before
   // the head that counts them, so an entry the head has not reached is at
   // most capacity - 1 past it, and one a lap or more ahead of the reader is
-  // whole laps ahead. Any other entry is damage, reported once per take.
+  // whole laps ahead. A sample the reader could not take, its entry naming
+  // it or a later one, was published before the head was read: the head is
+  // past it. Anything else is damage, reported once per take.
   bool skip_overwritten() {
     const auto entry = topic_->ring(next_).load(std::memory_order_acquire);
     const auto head = topic_->header().head.load(std::memory_order_acquire);
@@ -417,7 +418,10 @@ class Cursor {
         (ahead > 0 && (static_cast<std::uint64_t>(ahead) % capacity != 0 || (seq >= head && seq - head >= capacity))))
       note_damage(entry, ahead, head);
     const auto to = std::max(next_ + 1, head > capacity ? head - capacity : 0);
-    if (to > head) return false;
+    if (to > head) {
+      note_damage(entry, ahead, head);
+      return false;
+    }
     skip_to(to);
     return true;
   }
