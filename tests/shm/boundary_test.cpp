@@ -178,6 +178,40 @@ TEST_F(Boundary, RingEntriesFarAheadOfTheHeadAreDamageAndEndTheReadAtOnce) {
   EXPECT_EQ(*next->value, 2);
 }
 
+// A worker reading a damaged topic (here: forward) reports the damage once
+// on errors() and goes on: the next sample published for real reaches it.
+// A damaged ring used to end the worker, and every chain linked to it,
+// without a word.
+TEST_F(Boundary, DamageReachesErrorsOnceAndAWorkerReadsOn) {
+  const shm::TopicQos qos{.capacity = 8};
+  auto publisher = core.publisher<int>("forged", qos);
+  auto errors = core.errors().subscribe();
+  std::promise<void> first_seen;
+  std::promise<int> after_damage;
+  int seen = 0;
+  forward(core.subscribe<int>("forged", {}, qos), [&](const shm::View<int>& v, Clock::time_point) {
+    if (++seen == 1) first_seen.set_value();
+    else if (seen == 2) after_damage.set_value(*v);
+  });
+  ASSERT_TRUE(publisher.publish(1));
+  ASSERT_EQ(first_seen.get_future().wait_for(10s), std::future_status::ready);
+  const MappedTopic mapped{core.domain(), "forged"};
+  ASSERT_TRUE(mapped.a_subscriber_sleeps()) << "the worker waits for the next sample";
+  for (std::uint64_t seq = 1; seq < 9; ++seq)
+    mapped.ring(seq).store(shm::detail::RingEntry::pack(seq + (1ull << 39) - 8, 0));
+  mapped.header().data.ring_always();  // as a publisher would, after writing them
+  const auto said = errors.read_for(10s);
+  ASSERT_TRUE(said) << said.error().describe();
+  EXPECT_EQ(said->value.code, Errc::damaged) << said->value.describe();
+  for (std::uint64_t seq = 1; seq < 9; ++seq)
+    mapped.ring(seq).store(shm::detail::RingEntry::pack(seq - 8, shm::detail::kNoChunk));
+  ASSERT_TRUE(publisher.publish(2));
+  auto next = after_damage.get_future();
+  ASSERT_EQ(next.wait_for(10s), std::future_status::ready) << "the worker ended at the damage";
+  EXPECT_EQ(next.get(), 2);
+  EXPECT_FALSE(errors.try_read()) << "the same damage is reported once, not on every read";
+}
+
 // Sizes whose product wraps around are refused one by one, by name, before
 // any memory is reserved (a topic of 12 KiB with messages of 2^58 bytes
 // had its publisher write outside its segment).

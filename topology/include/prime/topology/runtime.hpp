@@ -1,6 +1,10 @@
 #pragma once
 
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
 #include <exception>
+#include <mutex>
 #include <memory>
 #include <stop_token>
 #include <string>
@@ -77,10 +81,31 @@ void spawn_reader(const std::weak_ptr<RuntimeState>& runtime, Reader<T> reader, 
     auto report = [&](const std::string& why) {
       if (auto r = runtime.lock()) r->report({Errc::block_failed, what + ": " + why});
     };
+    // A read that fails for another reason than the stop (damaged shared
+    // memory, say) is reported, once while it repeats, and read again after
+    // a pause that grows to 100 ms: a damaged source neither ends the chain
+    // nor spins a core.
+    std::string last_failure;
+    auto pause = std::chrono::milliseconds{1};
     while (true) {
       batch.clear();
       try {
-        if (!reader.read_some(batch, kBatch, Clock::time_point::max(), stop)) return;  // only a stop ends it
+        auto read = reader.read_some(batch, kBatch, Clock::time_point::max(), stop);
+        if (!read) {
+          if (stop.stop_requested() || read.error().code == Errc::stopped) return;
+          if (read.error().message != last_failure) {
+            last_failure = read.error().message;
+            if (auto r = runtime.lock()) r->report(read.error());
+          }
+          std::mutex m;
+          std::condition_variable_any cv;
+          std::unique_lock lock{m};
+          cv.wait_for(lock, stop, pause, [] { return false; });
+          pause = std::min(pause * 2, std::chrono::milliseconds{100});
+          continue;
+        }
+        last_failure.clear();
+        pause = std::chrono::milliseconds{1};
       } catch (const std::exception& e) {
         report(std::string{"a value could not be taken (lost to this reader): "} + e.what());
       } catch (...) {
