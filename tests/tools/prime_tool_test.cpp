@@ -322,6 +322,38 @@ TEST(PrimeTool, DomainsAndCleanAllGoOnPastADomainThisUserMayNotRead) {
   EXPECT_TRUE(publisher.publish(Tick{1, 0, {}})) << "the domain is as it was";
 }
 
+// A domain set up to be shared (permissions 0666 here, 0660 for a group)
+// is joined by the tool as its participants join it: pub works for the
+// user who set it up (it was refused: the tool asked for 0600). Another
+// user's tool reads or joins it only when told to trust that user
+// (--owner): whoever made a domain's files chose what the tool would read.
+TEST(PrimeTool, ASharedDomainIsJoinedAsSetUpAndAnotherUsersOnlyWithOwner) {
+  if (::geteuid() != 0) GTEST_SKIP() << "needs root, to run the tool as another user";
+  const auto domain = unique_domain("tool-shared");
+  shm::Core core{domain, {.permissions = 0666}};
+  auto reader = core.subscribe<Tick>("shared").subscribe();
+  const auto pub = prime(domain, {"pub", "shared", "n=5"});
+  ASSERT_EQ(pub.code, 0) << pub.out;
+  auto got = reader.read_for(10s);
+  ASSERT_TRUE(got) << got.error().describe();
+  EXPECT_EQ(got->value->n, 5u);
+
+  const auto refused = prime_as_nobody({"--domain", domain, "ls"});
+  EXPECT_EQ(refused.code, 5) << refused.out;
+  EXPECT_NE(refused.out.find("shm domain '" + domain + "' was set up by root (uid 0), not by nobody (uid"),
+            std::string::npos)
+      << refused.out;
+  EXPECT_NE(refused.out.find("(--owner)"), std::string::npos) << refused.out;
+  const auto trusted = prime_as_nobody({"--domain", domain, "--owner", "root", "pub", "shared", "n=6"});
+  ASSERT_EQ(trusted.code, 0) << trusted.out;
+  got = reader.read_for(10s);
+  ASSERT_TRUE(got) << got.error().describe();
+  EXPECT_EQ(got->value->n, 6u);
+  const auto unknown = prime(domain, {"--owner", "no-such-user-here", "ls"});
+  EXPECT_EQ(unknown.code, 3) << unknown.out;
+  EXPECT_NE(unknown.out.find("--owner \"no-such-user-here\": no such user"), std::string::npos) << unknown.out;
+}
+
 // A domain whose processes were all killed keeps what they left for a look
 // (prime ls) until someone cleans it: a tool that reads or writes a topic
 // joins only a running system, so it never clears a dead one, as a program
@@ -469,7 +501,7 @@ TEST(PrimeTool, CleanReportsARemovalThatFailedWithTheReasonAndExitsNonZero) {
   ASSERT_EQ(::chown(topic.c_str(), 0, 0), 0);
   const auto cleaned = prime_as_nobody({"--domain", dead, "clean"});
   EXPECT_EQ(cleaned.code, 1) << cleaned.out;
-  EXPECT_NE(cleaned.out.find("could not remove " + topic + ": Permission denied (it belongs to user root"), std::string::npos)
+  EXPECT_NE(cleaned.out.find("could not remove " + topic + ": Permission denied (it belongs to root (uid 0))"), std::string::npos)
       << cleaned.out;
   EXPECT_EQ(cleaned.out.find("removed " + topic), std::string::npos) << cleaned.out;
   EXPECT_NE(cleaned.out.find("removed /dev/shm/prime." + dead + ".registry."), std::string::npos)

@@ -85,6 +85,8 @@ int main(int argc, char** argv) {
   app.add_option("--redis", o.redis,
                  "look at an Optimus domain on this Redis server (tcp://[user:password@]host:port or unix:///path) "
                  "instead; or credentials from $PRIME_REDIS_USER and $PRIME_REDIS_PASSWORD");
+  app.add_option("--owner", o.owner,
+                 "read and join a shm domain this user (a name or uid) set up; by default only your own are");
   app.add_flag("--json", o.json, "one JSON document (listings) or one per line (streams), for scripts");
   std::function<int()> run;
   const bool redis = [&] {

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <charconv>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -64,10 +65,59 @@ std::string joined(const std::vector<std::uint32_t>& list) {
 std::string pids(const std::vector<std::uint32_t>& list) { return list.empty() ? "-" : joined(list); }
 std::string json_pids(const std::vector<std::uint32_t>& list) { return "[" + joined(list) + "]"; }
 
-shm::RegistrySnapshot snapshot_of(const std::string& domain) {
-  auto seen = shm::inspect(domain);
-  if (!seen) throw Failure{{Errc::not_found, "no shm domain '" + domain + "' on this machine (prime domains lists them)"}};
+// "alice (uid 1000)", or "uid 1000" for a uid no user has.
+std::string user_named(uid_t uid) {
+  passwd entry{};
+  passwd* user = nullptr;
+  char text[1024];
+  if (::getpwuid_r(uid, &entry, text, sizeof text, &user) == 0 && user)
+    return std::string{user->pw_name} + " (uid " + std::to_string(uid) + ")";
+  return "uid " + std::to_string(uid);
+}
+
+// The user whose domains this tool reads and joins: --owner (a user's name
+// or uid), or this one. Another user's domain is never taken on trust:
+// whoever made its files first chose what this tool would read and write.
+uid_t trusted_owner(const Options& o) {
+  if (o.owner.empty()) return ::geteuid();
+  passwd entry{};
+  passwd* user = nullptr;
+  char text[1024];
+  if (::getpwnam_r(o.owner.c_str(), &entry, text, sizeof text, &user) == 0 && user) return user->pw_uid;
+  uid_t uid = 0;
+  const auto [end, ec] = std::from_chars(o.owner.data(), o.owner.data() + o.owner.size(), uid);
+  if (ec != std::errc{} || end != o.owner.data() + o.owner.size())
+    throw Failure{{Errc::not_found, "--owner " + quote(o.owner) + ": no such user on this machine"}};
+  return uid;
+}
+
+// The domain as it was set up: who made it and whom its files admit. A
+// domain that is not there, or was made by a user not trusted, is an error.
+shm::DomainAccess access_to(const Options& o) {
+  const auto access = shm::access_of(o.domain);
+  if (!access) throw Failure{{Errc::not_found, "no shm domain '" + o.domain + "' on this machine (prime domains lists them)"}};
+  if (const auto trusted = trusted_owner(o); access->owner != trusted)
+    throw Failure{{Errc::unreachable, "shm domain '" + o.domain + "' was set up by " + user_named(access->owner) +
+                                          ", not by " + user_named(trusted) +
+                                          ": prime reads and joins it only when told to trust that user (--owner)"}};
+  return *access;
+}
+
+shm::RegistrySnapshot snapshot_of(const Options& o) {
+  const auto access = access_to(o);
+  auto seen = shm::inspect(o.domain, access.owner);
+  if (!seen) throw Failure{{Errc::not_found, "no shm domain '" + o.domain + "' on this machine (prime domains lists them)"}};
   return *seen;
+}
+
+// How a command joins the domain (a participant named `participant`): as
+// its participants do, with its owner's segments and its mode (a group's
+// 0660 domain is joined as one of the group), and only while someone lives
+// in it. Where the mode has bits no segment may have (execute, set-id),
+// the participants' own checks refuse it.
+shm::DomainOptions joining(const Options& o, const std::string& participant) {
+  const auto access = access_to(o);
+  return {.permissions = access.permissions & 0666u, .owner = access.owner, .participant = participant, .only_if_alive = true};
 }
 
 // The topic or service of that name in a snapshot's list, or null.
@@ -116,13 +166,13 @@ struct Watch {
   std::size_t max_message_size = 0;
 
   Watch(const Options& o, const std::string& command)
-      : core{check(o.domain), {.participant = "prime " + command, .only_if_alive = true}}, reader{core.observe(o.name)} {
+      : core{check(o), joining(o, "prime " + command)}, reader{core.observe(o.name)} {
     for (const auto& t : core.registry().topics)
       if (t.name == o.name) schema = t.schema, max_message_size = t.qos.max_message_size;
   }
-  static std::string check(const std::string& domain) {
-    snapshot_of(domain);  // a domain that is not there is an error, not one this tool starts
-    return domain;
+  static std::string check(const Options& o) {
+    snapshot_of(o);  // a domain that is not there is an error, not one this tool starts
+    return o.domain;
   }
 };
 
@@ -148,11 +198,7 @@ std::optional<std::string> failed_removal(const std::string& line) {
   const auto path = line.substr(failed.size(), line.find(": ") - failed.size());
   struct stat st {};
   if (::lstat(path.c_str(), &st) != 0 || st.st_uid == ::geteuid()) return line;
-  passwd entry{};
-  passwd* user = nullptr;
-  char text[1024];
-  const std::string name = ::getpwuid_r(st.st_uid, &entry, text, sizeof text, &user) == 0 && user ? user->pw_name : "?";
-  return line + " (it belongs to user " + name + ", uid " + std::to_string(st.st_uid) + ")";
+  return line + " (it belongs to " + user_named(st.st_uid) + ")";
 }
 
 }  // namespace
@@ -193,10 +239,10 @@ int shm_domains(const Options& o) {
 }
 
 int shm_ls(const Options& o) {
-  const auto first = snapshot_of(o.domain);
+  const auto first = snapshot_of(o);
   const auto t0 = Clock::now();
   std::this_thread::sleep_for(200ms);  // the rates: samples published over this time
-  const auto second = snapshot_of(o.domain);
+  const auto second = snapshot_of(o);
   const auto seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   auto rate = [&](const shm::RegistrySnapshot::Topic& t) {
     const auto* before = find_topic(first, t.name);
@@ -240,7 +286,7 @@ int shm_ls(const Options& o) {
 }
 
 int shm_info(const Options& o) {
-  const auto s = snapshot_of(o.domain);
+  const auto s = snapshot_of(o);
   auto fields = [](const std::string& schema) {
     std::ostringstream out;
     try {
@@ -349,11 +395,11 @@ std::vector<std::byte> build(const std::string& schema, std::size_t size, const 
 }  // namespace
 
 int shm_pub(const Options& o) {
-  const auto s = snapshot_of(o.domain);
+  const auto s = snapshot_of(o);
   const auto* t = find_topic(s, o.name);
   if (!t) throw Failure{{Errc::not_found, "no topic '" + o.name + "' in shm domain '" + o.domain + "' (its type comes from a publisher or subscriber)"}};
   const auto bytes = build(t->schema, t->qos.max_message_size, o.values);
-  shm::Core core{o.domain, {.participant = "prime pub", .only_if_alive = true}};
+  shm::Core core{o.domain, joining(o, "prime pub")};
   auto publisher = core.raw_publisher(o.name);
   finish_on_ctrl_c();
   const auto period = o.rate > 0 ? std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1 / o.rate)) : Clock::duration::zero();
@@ -371,11 +417,11 @@ int shm_pub(const Options& o) {
 }
 
 int shm_call(const Options& o) {
-  const auto s = snapshot_of(o.domain);
+  const auto s = snapshot_of(o);
   const auto* v = find_service(s, o.name);
   if (!v) throw Failure{{Errc::not_found, "no service '" + o.name + "' in shm domain '" + o.domain + "'"}};
   const auto request = build(v->request_schema, v->qos.max_request_size, o.values);
-  shm::Core core{o.domain, {.participant = "prime call", .only_if_alive = true}};
+  shm::Core core{o.domain, joining(o, "prime call")};
   // At least a millisecond: 0 would mean the service's own timeout. (main bounds --timeout.)
   const auto timeout = std::chrono::milliseconds{static_cast<std::int64_t>(std::ceil(o.timeout * 1000))};
   auto service = core.raw_chain(o.name, {.timeout = timeout});
@@ -401,7 +447,7 @@ int shm_call(const Options& o) {
 }
 
 int shm_graph(const Options& o) {
-  const auto s = snapshot_of(o.domain);
+  const auto s = snapshot_of(o);
   std::map<std::uint32_t, std::string> processes;  // pid -> the participants it runs
   for (const auto& p : s.participants)
     if (p.alive) processes[p.pid] += (processes[p.pid].empty() ? "" : ", ") + p.name;
@@ -434,7 +480,7 @@ int shm_clean(const Options& o) {
       if (d.unreadable.empty()) domains.push_back(d.name);
       else std::cerr << "prime: left domain '" << d.name << "' alone: " << d.unreadable << '\n';
   } else {
-    snapshot_of(o.domain);
+    snapshot_of(o);
     domains.push_back(o.domain);
   }
   std::size_t done = 0, failed = 0;

@@ -23,6 +23,7 @@ struct Options {
   double rate = 0;                  // pub: samples per second (0: once)
   double timeout = 5;               // call: seconds; echo: how long to wait for a first sample
   bool all = false;                 // clean: every domain
+  std::string owner;                // another user (name or uid) whose shm domain this tool may read and join
 };
 
 // From now on Ctrl-C ends the command's loop (ctrl_c_pressed()) instead of

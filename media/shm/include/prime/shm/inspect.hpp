@@ -4,6 +4,8 @@
 #include <cstring>
 #include <filesystem>
 #include <optional>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <string>
 #include <vector>
 
@@ -27,11 +29,28 @@ struct DomainSummary {
   std::string unreadable{};  // why it could not be looked at (another user's, say); the counts are then 0
 };
 
-// What domain `domain` holds now, or nothing when it does not exist.
-[[nodiscard]] inline std::optional<RegistrySnapshot> inspect(const std::string& domain) {
-  auto registry = detail::Registry::watch(domain);
+// What domain `domain` holds now, or nothing when it does not exist. Its
+// registry is read only when `owner` (this user by default) made it.
+[[nodiscard]] inline std::optional<RegistrySnapshot> inspect(const std::string& domain, uid_t owner = ::geteuid()) {
+  auto registry = detail::Registry::watch(domain, owner);
   if (!registry) return std::nullopt;
   return detail::snapshot(registry);
+}
+
+// Who set domain `domain` up and whom its segments admit: the owner and
+// permission bits of its registry, or nothing when it does not exist. A
+// tool joins a running domain with these (DomainOptions::owner and
+// permissions), so a group's 0660 domain is joined as its participants do,
+// once the tool has decided to trust that owner.
+struct DomainAccess {
+  uid_t owner = 0;
+  unsigned permissions = 0;
+};
+[[nodiscard]] inline std::optional<DomainAccess> access_of(const std::string& domain) {
+  struct stat st {};
+  const auto path = std::string{detail::kShmDirectory} + "/" + detail::segment_name(domain, "registry", "");
+  if (::lstat(path.c_str(), &st) != 0) return std::nullopt;
+  return DomainAccess{.owner = st.st_uid, .permissions = static_cast<unsigned>(st.st_mode & 07777)};
 }
 
 // The domains whose registry lies in /dev/shm, alive or dead; one this

@@ -92,15 +92,16 @@ class Registry : public std::enable_shared_from_this<Registry> {
   }
   // The registry of `domain` seen from outside, joining nothing (no lease,
   // no slot): for tools. Null when the domain does not exist. Its
-  // segments are taken from this user alone, with the registry's mode.
-  static std::shared_ptr<Registry> watch(const std::string& domain) {
-    auto segment = Segment::open_existing(segment_name(domain, "registry", ""));
+  // segments are taken from `owner` alone (this user by default), with the
+  // registry's mode.
+  static std::shared_ptr<Registry> watch(const std::string& domain, uid_t owner = ::geteuid()) {
+    auto segment = Segment::open_existing(segment_name(domain, "registry", ""), Access{.permissions = 07777, .owner = owner});
     if (!segment || segment->size() < sizeof(RegistryLayout)) return nullptr;
     const auto* r = std::launder(reinterpret_cast<const RegistryLayout*>(segment->data()));
     if (r->magic.load(std::memory_order_acquire) != kRegistryMagic) return nullptr;
     struct stat st {};
     const unsigned mode = ::fstat(segment->fd(), &st) == 0 ? st.st_mode & 0666 : 0600;
-    return std::shared_ptr<Registry>{new Registry{domain, {.permissions = mode}, std::move(*segment)}};
+    return std::shared_ptr<Registry>{new Registry{domain, {.permissions = mode, .owner = owner}, std::move(*segment)}};
   }
   Registry(const Registry&) = delete;
   Registry& operator=(const Registry&) = delete;
