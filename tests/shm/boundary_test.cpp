@@ -110,6 +110,10 @@ TEST(BoundarySegments, ASegmentOfAnotherUserOrWithAWiderModeIsRefused) {
     EXPECT_TRUE(fails_with([&] { shm::Core core{domain}; }, Errc::unreachable, "it belongs to uid 65534, not to uid 0"));
     shm::Core trusting{domain, {.owner = 65534}};  // a domain whose options name that owner takes it
     EXPECT_EQ(trusting.registry().participants.size(), 1u);
+    // It makes no segment of its own there: that would be root's, and refused.
+    EXPECT_TRUE(fails_with([&] { (void)trusting.publisher<int>("theirs"); }, Errc::not_found,
+                           "is not there, and only uid 65534 (DomainOptions::owner) makes this domain's segments"));
+    EXPECT_EQ(segments_of(domain), 1) << "nothing made that it would then refuse, and leave";
   }
   ::close(fd);
   ::unlink(registry.c_str());

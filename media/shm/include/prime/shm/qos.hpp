@@ -115,7 +115,9 @@ struct DomainOptions {
   // A domain shared by several users (permissions 0660, say) names the one
   // who makes its segments. A segment of anyone else is refused, naming
   // the file and its owner: another user could otherwise make a domain's
-  // files first and map what its participants then write.
+  // files first and map what its participants then write. A participant
+  // whose owner is another user makes no segment: it joins the registry,
+  // topics and services that user made (a missing one is Errc::not_found).
   std::optional<uid_t> owner{};
   // How this participant is listed in the registry; empty: the program's name.
   std::string participant{};

@@ -88,7 +88,7 @@ class Segment {
   static Segment open(const std::string& name, const Access& access, std::size_t size, const std::string& what,
                       IsReady&& is_ready, SetUp&& set_up) {
     while (true) {
-      Segment segment{name, open_object(name, access.permissions, what)};
+      Segment segment{name, open_object(name, access, what)};
       segment.check(access, what, true);
       lock_byte(segment.fd(), 0, what + " (being set up)");
       struct Unlock {
@@ -158,12 +158,20 @@ class Segment {
  private:
   Segment(std::string name, bip::shared_memory_object object) : name_{std::move(name)}, object_{std::move(object)} {}
 
-  static bip::shared_memory_object open_object(const std::string& name, unsigned permissions, const std::string& what) {
+  // Opens `name`, creating it when missing, unless the segments `access`
+  // admits are another user's: what this process made would be its own,
+  // and refused. Those it only opens, and a missing one is Errc::not_found.
+  static bip::shared_memory_object open_object(const std::string& name, const Access& access, const std::string& what) {
     try {
+      if (access.owner != ::geteuid()) return bip::shared_memory_object{bip::open_only, name.c_str(), bip::read_write};
       bip::permissions perm;
-      perm.set_permissions(permissions);
+      perm.set_permissions(access.permissions);
       return bip::shared_memory_object{bip::open_or_create, name.c_str(), bip::read_write, perm};
     } catch (const bip::interprocess_exception& e) {
+      if (e.get_error_code() == bip::not_found_error)
+        throw Failure{{Errc::not_found, what + ": " + kShmDirectory + "/" + name + " is not there, and only uid " +
+                                            std::to_string(access.owner) +
+                                            " (DomainOptions::owner) makes this domain's segments: it is joined, not made, here"}};
       throw Failure{{Errc::unreachable, what + ": cannot open shared memory '" + name + "': " + e.what()}};
     }
   }
