@@ -51,7 +51,8 @@ class Boundary : public ::testing::Test {
 
 // Linking raw chains (a tool's) of services whose types differ is refused
 // when the link is made: the first one's output would be written into a
-// cell made for the second one's smaller request.
+// cell made for the second one's smaller request. A service of Bytes takes
+// any type, and a reply too large for its cell is an error of that call.
 TEST_F(Boundary, LinkingServicesWhoseTypesDifferIsRefusedWhenLinked) {
   core.serve("a", [](const Small&) { return Large{}; });
   core.serve("b", [](const Small& s) { return s; });
@@ -62,6 +63,20 @@ TEST_F(Boundary, LinkingServicesWhoseTypesDifferIsRefusedWhenLinked) {
   const auto out = fine.call(std::as_bytes(std::span{&seven, 1}));
   ASSERT_TRUE(out) << out.error().describe();
   ASSERT_EQ(out->size(), sizeof(Small));
+
+  // A service of Bytes takes any reply, each write checked against its cell.
+  auto size_of = [](std::span<const std::byte> b) { return Small{b.size()}; };
+  core.serve("sizes", size_of, {.max_request_size = sizeof(Large), .max_reply_size = sizeof(Small)});
+  core.serve("tiny", size_of, {.max_request_size = 16, .max_reply_size = sizeof(Small)});
+  const auto sized = shm::link(core.raw_chain("a"), core.raw_chain("sizes")).call(std::as_bytes(std::span{&seven, 1}));
+  ASSERT_TRUE(sized) << sized.error().describe();
+  ASSERT_EQ(sized->size(), sizeof(Small));
+  Small answer{};
+  std::memcpy(&answer, sized->data(), sizeof answer);
+  EXPECT_EQ(answer.value, sizeof(Large));
+  const auto too_big = shm::link(core.raw_chain("a"), core.raw_chain("tiny")).call(std::as_bytes(std::span{&seven, 1}));
+  ASSERT_FALSE(too_big);
+  EXPECT_EQ(too_big.error().code, Errc::limit_exceeded) << too_big.error().describe();
 }
 
 // A service whose header says its cells are smaller than its types (a

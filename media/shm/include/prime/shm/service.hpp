@@ -149,13 +149,14 @@ static_assert(Chain<ServiceChain<int, double>>);
 
 // Linking two service chains forwards: the first one's output is written
 // straight into the second one's cell by the first service's worker. The
-// first one's reply type must be the second one's request type (raw chains
-// of tools carry the types their services have): Errc::type_mismatch.
+// first one's reply type must be the second one's request type, or the
+// second must take Bytes (raw chains of tools carry the types their
+// services have): Errc::type_mismatch.
 template <Message A, Message B, Message C>
 [[nodiscard]] ServiceChain<A, C> link(const ServiceChain<A, B>& first, const ServiceChain<B, C>& second) {
   const auto& out = first.route().back();
   const auto& in = second.route().front();
-  if (!(out->reply() == in->request()))
+  if (!detail::forwards_into(out->reply(), in->request()))
     throw Failure{{Errc::type_mismatch, "cannot link service '" + out->name() + "', which gives " + out->reply().describe() +
                                             ", to service '" + in->name() + "', which takes " + in->request().describe()}};
   auto route = first.route();

@@ -161,7 +161,7 @@ class Server {
     try {
       // The next service of a linked call may have come back for other
       // types since the call was linked: its cell is not this reply's.
-      if (next && !(next->header().request_type == service_->header().reply_type))
+      if (next && !forwards_into(service_->header().reply_type, next->header().request_type))
         throw Failure{{Errc::type_mismatch, "the next service, '" + next->name() + "', takes " +
                                                 next->header().request_type.describe() + ", not this one's reply, " +
                                                 service_->header().reply_type.describe()}};

@@ -20,9 +20,17 @@
 #include "prime/shm/detail/registry.hpp"
 #include "prime/shm/detail/segment.hpp"
 #include "prime/shm/detail/service_layout.hpp"
+#include "prime/shm/message.hpp"
 #include "prime/shm/qos.hpp"
 
 namespace prime::shm::detail {
+
+// Whether a linked call may write a reply of type `reply` into a request
+// cell of type `request`: the same type, or bytes, which a service of
+// Bytes takes whatever they are (each write is checked against the cell).
+inline bool forwards_into(const Fingerprint& reply, const Fingerprint& request) {
+  return reply == request || request == Fingerprint::of<Bytes>();
+}
 
 // The types and limits a service is made with: what its segment records.
 struct ServiceSpec {
