@@ -488,9 +488,10 @@ TEST(PrimeTool, AHostileTypeDescriptionIsRefusedByFieldInsteadOfHangingEchoAndCa
 }
 
 // What clean could not remove it says it could not, with the reason, and
-// exits 1; it never says it removed what is still there. A dead domain of
-// user nobody, one of whose files is root's: /dev/shm (sticky) lets only a
-// file's owner remove it.
+// exits 1; it never says it removed what is still there, and keeps the
+// registry that lists it for a later clean. A dead domain of user nobody,
+// one of whose files is root's: /dev/shm (sticky) lets only a file's owner
+// remove it.
 TEST(PrimeTool, CleanReportsARemovalThatFailedWithTheReasonAndExitsNonZero) {
   if (::geteuid() != 0) GTEST_SKIP() << "needs root, to run the tool as another user";
   const auto dead = unique_domain("tool-clean-fails");
@@ -504,9 +505,15 @@ TEST(PrimeTool, CleanReportsARemovalThatFailedWithTheReasonAndExitsNonZero) {
   EXPECT_NE(cleaned.out.find("could not remove " + topic + ": Permission denied (it belongs to root (uid 0))"), std::string::npos)
       << cleaned.out;
   EXPECT_EQ(cleaned.out.find("removed " + topic), std::string::npos) << cleaned.out;
-  EXPECT_NE(cleaned.out.find("removed /dev/shm/prime." + dead + ".registry."), std::string::npos)
-      << "what it could remove, it did: " << cleaned.out;
-  EXPECT_TRUE(std::filesystem::remove(topic));
+  const std::string registry = "/dev/shm/prime." + dead + ".registry.";
+  EXPECT_NE(cleaned.out.find("could not remove " + registry + ": kept: it lists the segments that stay"),
+            std::string::npos)
+      << "the registry stays, so the topic is no orphan a later clean cannot find: " << cleaned.out;
+  EXPECT_TRUE(std::filesystem::remove(topic));  // as its owner would
+  const auto again = prime_as_nobody({"--domain", dead, "clean"});
+  EXPECT_EQ(again.code, 0) << again.out;
+  EXPECT_NE(again.out.find("removed " + registry), std::string::npos) << again.out;
+  EXPECT_EQ(segments_of(dead), 0) << again.out;
 }
 
 // Compared with a twin topic no one observes, in batches taken in turn, so a

@@ -90,9 +90,8 @@ inline std::vector<std::string> clean(const std::string& domain) {
   auto registry = detail::Registry::watch(domain);
   if (!registry) return {};
   std::vector<std::string> done;
-  for (const auto& [name, error] : registry->remove_if_dead())
-    done.push_back(error == 0 ? "removed /dev/shm/" + name
-                              : "could not remove /dev/shm/" + name + ": " + std::strerror(error));
+  for (const auto& [name, why] : registry->remove_if_dead())
+    done.push_back(why.empty() ? "removed /dev/shm/" + name : "could not remove /dev/shm/" + name + ": " + why);
   if (!done.empty()) return done;
   const auto before = registry->participants();
   // Slots are cleared by a participant, whose lease tells the others it is

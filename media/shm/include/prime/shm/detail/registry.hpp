@@ -216,22 +216,35 @@ class Registry : public std::enable_shared_from_this<Registry> {
     return list;
   }
 
-  // A segment removed, or not (`error`: the errno that kept it).
+  // A segment removed, or not (`why`: what kept it).
   struct Removal {
     std::string name;
-    int error = 0;
+    std::string why{};
   };
   // When no participant of the domain lives: removes every segment of it
   // and says how each went (a dead domain's remains); otherwise nothing.
+  // A segment that stays (another user's, say) stays listed, and so does
+  // the registry that lists it, for a clean by someone who may remove it.
   std::vector<Removal> remove_if_dead() {
     Locked lock{*this};
     auto& r = layout();
     if (std::any_of(std::begin(r.participants), std::end(r.participants), [this](const auto& p) { return alive(p.id.load()); }))
       return {};
     std::vector<Removal> removed;
-    for (auto& e : r.endpoints)
-      if (e.used) removed.push_back({segment_name(domain_, kind_name(e.kind), read_text(e.name)), forget(e)});
-    removed.push_back({segment_.name(), remove_registry()});
+    bool all_gone = true;
+    for (auto& e : r.endpoints) {
+      if (!e.used) continue;
+      auto name = segment_name(domain_, kind_name(e.kind), read_text(e.name));
+      const int error = forget(e);
+      all_gone = all_gone && error == 0;
+      removed.push_back({std::move(name), error == 0 ? std::string{} : std::strerror(error)});
+    }
+    if (!all_gone) {
+      removed.push_back({segment_.name(), "kept: it lists the segments that stay"});
+      return removed;
+    }
+    const int error = remove_registry();
+    removed.push_back({segment_.name(), error == 0 ? std::string{} : std::strerror(error)});
     return removed;
   }
 
@@ -322,8 +335,9 @@ class Registry : public std::enable_shared_from_this<Registry> {
       const bool anyone_alive = std::any_of(std::begin(r.participants), std::end(r.participants),
                                             [this](const auto& p) { return alive(p.id.load()); });
       if (!anyone_alive) {
-        for (auto& e : r.endpoints) forget(e);
-        remove_registry();
+        bool all_gone = true;
+        for (auto& e : r.endpoints) all_gone = forget(e) == 0 && all_gone;
+        if (all_gone) remove_registry();  // else it lists what stays, for a clean
       }
     } catch (...) {
       // The lease goes with the descriptor: others see this participant gone.
@@ -362,13 +376,15 @@ class Registry : public std::enable_shared_from_this<Registry> {
   static std::size_t slot_of(ParticipantId id) { return static_cast<std::size_t>(id & ((1u << kSlotBits) - 1)) - 1; }
   static off_t lease_byte(std::size_t slot) { return static_cast<off_t>(1 + slot); }
 
-  // Removes entry `e`'s segment and forgets it; 0, or the errno that kept the segment.
+  // Removes entry `e`'s segment and forgets it; 0, or the errno that kept
+  // the segment, which then stays listed (never an orphan no clean finds).
   int forget(RegistryLayout::Endpoint& e) {
     if (!e.used) return 0;
     const int error = Segment::remove(segment_name(domain_, kind_name(e.kind), read_text(e.name)));
+    if (error != 0) return error;
     e.used = 0;
     e.name[0] = '\0';
-    return error;
+    return 0;
   }
 
   template <std::size_t N>
