@@ -126,9 +126,10 @@ TEST_F(OptimusProcess, ARequestOfAKilledCallerExpiresSoonAfterItsDeadline) {
 }
 
 // `block` readers killed (kill -9: no goodbye) leave no field in their
-// source's readers hash once their leases have run out: a writer that looks
-// strikes them (one values were dropped for, and so has a count there, and
-// one that had room), and so does a reader that subscribes.
+// source's readers hash once their leases have run out and the stream has
+// passed them: a writer that looks strikes them (one values were dropped
+// for, and so has a count there, at once; one that had room once its room
+// is used up), and so does a reader that subscribes.
 TEST_F(OptimusProcess, KilledBlockReadersLeaveNothingInTheReadersHash) {
   optimus::Core core{options()};
   auto errors = core.errors().subscribe();
@@ -153,13 +154,50 @@ TEST_F(OptimusProcess, KilledBlockReadersLeaveNothingInTheReadersHash) {
   idle.kill();
   ASSERT_TRUE(leases_gone()) << "the dead readers' leases never ran out";
   ASSERT_TRUE(publisher.publish(3));
+  EXPECT_EQ(raw.integer({"HLEN", readers}), 1) << "the writer struck the full one; the one with room is left";
+  ASSERT_TRUE(publisher.publish(4));
+  ASSERT_TRUE(publisher.publish(5));  // its room of 2 past what it read: it would be waited for
   EXPECT_EQ(raw.integer({"HLEN", readers}), 0) << "the writer struck both dead readers";
+  EXPECT_FALSE(errors.try_read()) << "and waited for neither";
 
   auto another = helper({"block_reader", "held"});
   another.kill();
   ASSERT_TRUE(leases_gone());
+  // Two more: its room is used up, which the writers (looking before each
+  // append) have not yet seen; a reader subscribing looks past the last.
+  for (int i = 6; i < 8; ++i) ASSERT_TRUE(publisher.publish(i));
+  EXPECT_EQ(raw.integer({"HLEN", readers}), 1) << "left by the writers";
   auto reader = core.subscribe<int>("held", {.capacity = 2, .overflow = Overflow::block}).subscribe();
   EXPECT_EQ(raw.integer({"HLEN", readers}), 1) << "the new reader struck the dead one; its own field is left";
+}
+
+// A `block` reader that only paused (read nothing for longer than its
+// lease, with room to spare) is not taken for gone: it reads on with
+// nothing lost and no warning that it may have lost values (it was struck
+// from the readers hash, and told so, as if it had died).
+TEST_F(OptimusProcess, ABlockReaderThatPausedWithRoomReadsOnWithoutAWarning) {
+  optimus::Core core{options()};
+  auto errors = core.errors().subscribe();
+  auto publisher = core.publisher<int>("paused", {.capacity = 8, .overflow = Overflow::block, .block_timeout = 50ms});
+  auto reader = core.subscribe<int>("paused", {.capacity = 4, .overflow = Overflow::block}).subscribe();
+  ASSERT_TRUE(publisher.publish(1));
+  ASSERT_TRUE(reader.read_for(5s));
+  RawRedis raw{shared_redis().url()};
+  const auto give_up = Clock::now() + 10s;
+  while (raw.command({"KEYS", domain + ":readers:paused:lease:*"})->elements != 0) {  // the server's clock runs it out
+    ASSERT_LT(Clock::now(), give_up) << "the lease never ran out";
+    std::this_thread::sleep_for(50ms);  // a poll of the server, not a wait for anything of ours
+  }
+  ASSERT_TRUE(publisher.publish(2));
+  ASSERT_TRUE(publisher.publish(3));
+  for (int expected : {2, 3}) {
+    const auto got = reader.read_for(5s);
+    ASSERT_TRUE(got) << got.error().describe();
+    EXPECT_EQ(got->value, expected);
+  }
+  EXPECT_EQ(reader.lost(), 0u);
+  const auto said = errors.try_read();
+  EXPECT_FALSE(said) << said->value.describe();
 }
 
 TEST_F(OptimusProcess, AServiceProcessKilledAndRestartedIsFoundAgain) {

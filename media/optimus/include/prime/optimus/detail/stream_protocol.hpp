@@ -40,9 +40,12 @@ namespace prime::optimus::detail {
 // "sweep" appends nothing (a reader subscribing: below).
 // A reader whose lease (the key ARGV[5] .. id) has run out is gone: a
 // process that died, or one that has not read for kReaderLease. Every mode
-// but "drop" strikes its fields from the readers hash, so that killed
-// readers leave nothing behind (fields have no TTL of their own), and no
-// writer waits for them; a gone reader that reads again registers again.
+// but "drop" strikes its fields from the readers hash once it would be
+// waited for (its room is used up), so that no writer waits for it and a
+// killed reader leaves nothing behind for longer than it takes the stream
+// to pass it (fields have no TTL of their own). A reader with room is left
+// alone: one that only paused reads on as if nothing happened. A struck
+// reader that reads again registers again.
 //   KEYS: stream, readers hash.  ARGV: maxlen, stamp, message, mode, lease prefix.
 // The readers hash holds, per reader id, "r<id>" = reader_progress() and
 // "l<id>" = how many values were dropped for it.
@@ -59,13 +62,18 @@ end
 local full = {}
 if ARGV[4] ~= 'drop' then
   local readers = redis.call('HGETALL', KEYS[2])
+  local progress = {}
+  for i = 1, #readers, 2 do
+    if string.sub(readers[i], 1, 1) == 'r' then progress[string.sub(readers[i], 2)] = readers[i + 1] end
+  end
   for i = 1, #readers, 2 do
     local id = string.sub(readers[i], 2)
-    if redis.call('EXISTS', ARGV[5] .. id) == 0 then
+    local cursor, capacity = string.match(progress[id] or '', '^(%d+) (%d+)$')
+    local behind = cursor ~= nil and n - tonumber(cursor) > tonumber(capacity)
+    if (behind or cursor == nil) and redis.call('EXISTS', ARGV[5] .. id) == 0 then
       redis.call('HDEL', KEYS[2], readers[i])
-    elseif string.sub(readers[i], 1, 1) == 'r' then
-      local cursor, capacity = string.match(readers[i + 1], '^(%d+) (%d+)$')
-      if cursor and n - tonumber(cursor) > tonumber(capacity) then full[#full + 1] = id end
+    elseif behind and string.sub(readers[i], 1, 1) == 'r' then
+      full[#full + 1] = id
     end
   end
   if ARGV[4] == 'sweep' then return {0, 0} end

@@ -139,7 +139,7 @@ class StreamReader final : public Reader<T>::Impl {
   }
   // Their two replies; an error names the source. A progress field that is
   // new after the first says a writer struck this reader (it read nothing
-  // for kReaderLease): writers did not wait for it meanwhile, and the count
+  // for kReaderLease, its room used up): writers did not wait for it meanwhile, and the count
   // of what they dropped for it went with its fields. Said, not hidden.
   std::expected<void, Error> registration_replies(Connection& c) {
     for (int i = 0; i < 2; ++i) {
@@ -150,7 +150,7 @@ class StreamReader final : public Reader<T>::Impl {
       if (i == 1 && registered_ && (**registered).type == REDIS_REPLY_INTEGER && (**registered).integer == 1)
         state_->report({Errc::overflow, "source '" + state_->name() + "': a block reader read nothing for " +
                                             std::to_string(kReaderLease.count()) +
-                                            " ms and was taken for gone; registered again, it may have lost values not counted by lost()"});
+                                            " ms with its room used up and was taken for gone; registered again, it may have lost values not counted by lost()"});
     }
     registered_ = true;
     return {};
