@@ -1,4 +1,4 @@
-// What the README's PRIME_DESCRIBE example takes as given.
+// What the PRIME_DESCRIBE example of docs/tool.md takes as given.
 #pragma once
 
 #include "prime/common/bounded_string.hpp"

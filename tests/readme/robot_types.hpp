@@ -1,4 +1,5 @@
-// What the README's first example takes as given: the robot's message types.
+// What the front page's Liberty and Radiant examples take as given: the
+// robot's message types.
 #pragma once
 
 #include <iostream>
@@ -6,5 +7,6 @@
 struct Scan {};
 struct Pose {};
 struct Path {};
+struct Command {};
 
 inline void follow(const Path&) {}

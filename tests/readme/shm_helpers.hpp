@@ -1,4 +1,4 @@
-// What the README's Shm example takes as given: the user's own code.
+// What the Shm examples (README.md, docs/shm.md) take as given: the user's own code.
 #pragma once
 
 #include <chrono>
