@@ -15,6 +15,9 @@
 // --input runs one saved input, as libFuzzer would.
 
 #include <fcntl.h>
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#include <sanitizer/common_interface_defs.h>
+#endif
 
 #include <algorithm>
 #include <chrono>
@@ -135,7 +138,13 @@ inline int run(int argc, char** argv, const std::vector<Input>& seeds, const Tar
   }
   std::snprintf(detail::saved_path, sizeof detail::saved_path, "fuzz-input-%d.bin", static_cast<int>(::getpid()));
   std::signal(SIGALRM, detail::on_alarm);
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  // The sanitizer's own handlers report a crash (with its stack); the
+  // input is saved as it dies.
+  __sanitizer_set_death_callback([] { detail::save_current(); });
+#else
   for (const int s : {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT}) std::signal(s, detail::on_crash);
+#endif
   auto one = [&](const Input& input) {
     detail::current = &input;
     ::alarm(kSecondsPerInput);

@@ -205,15 +205,20 @@ TEST_F(Boundary, DamageReachesErrorsOnceAndAWorkerReadsOn) {
   const shm::TopicQos qos{.capacity = 8};
   auto publisher = core.publisher<int>("forged", qos);
   auto errors = core.errors().subscribe();
-  std::promise<void> first_seen;
-  std::promise<int> after_damage;
-  int seen = 0;
-  forward(core.subscribe<int>("forged", {}, qos), [&](const shm::View<int>& v, Clock::time_point) {
-    if (++seen == 1) first_seen.set_value();
-    else if (seen == 2) after_damage.set_value(*v);
+  struct Seen {  // the worker's, kept by it: it may outlive a test that failed
+    std::promise<void> first;
+    std::promise<int> after_damage;
+    int count = 0;
+  };
+  auto seen = std::make_shared<Seen>();
+  auto first = seen->first.get_future();
+  auto next = seen->after_damage.get_future();
+  forward(core.subscribe<int>("forged", {}, qos), [seen](const shm::View<int>& v, Clock::time_point) {
+    if (++seen->count == 1) seen->first.set_value();
+    else if (seen->count == 2) seen->after_damage.set_value(*v);
   });
   ASSERT_TRUE(publisher.publish(1));
-  ASSERT_EQ(first_seen.get_future().wait_for(10s), std::future_status::ready);
+  ASSERT_EQ(first.wait_for(10s), std::future_status::ready);
   const MappedTopic mapped{core.domain(), "forged"};
   ASSERT_TRUE(mapped.a_subscriber_sleeps()) << "the worker waits for the next sample";
   for (std::uint64_t seq = 1; seq < 9; ++seq)
@@ -225,7 +230,6 @@ TEST_F(Boundary, DamageReachesErrorsOnceAndAWorkerReadsOn) {
   for (std::uint64_t seq = 1; seq < 9; ++seq)
     mapped.ring(seq).store(shm::detail::RingEntry::pack(seq - 8, shm::detail::kNoChunk));
   ASSERT_TRUE(publisher.publish(2));
-  auto next = after_damage.get_future();
   ASSERT_EQ(next.wait_for(10s), std::future_status::ready) << "the worker ended at the damage";
   EXPECT_EQ(next.get(), 2);
   EXPECT_FALSE(errors.try_read()) << "the same damage is reported once, not on every read";
@@ -295,6 +299,13 @@ TEST_F(Boundary, AWaitOfMillisecondsMaxWaitsAsLongAsItTakes) {
   auto reader = core.subscribe<int>("slow", {}, qos).subscribe();
   for (int i = 0; i < 4; ++i) ASSERT_TRUE(publisher.publish(i));
   auto fifth = std::async(std::launch::async, [&] { return publisher.publish(4); });
+  struct Drain {  // a failed assertion still frees the publisher (the future waits for it)
+    decltype(fifth)& publish;
+    decltype(reader)& from;
+    ~Drain() {
+      while (publish.valid() && publish.wait_for(0s) != std::future_status::ready) (void)from.try_read();
+    }
+  } drain{fifth, reader};
   ASSERT_TRUE((MappedTopic{core.domain(), "slow"}.the_publisher_sleeps())) << "a full ring: the publisher waits";
   for (int i = 0; i < 5; ++i) {
     const auto got = reader.read_for(10s);
@@ -311,6 +322,10 @@ TEST_F(Boundary, AWaitOfMillisecondsMaxWaitsAsLongAsItTakes) {
   });
   auto patient = core.chain<Small, Small>("patient", {.timeout = std::chrono::milliseconds::max()});
   auto answer = std::async(std::launch::async, [&] { return patient.call(Small{5}); });
+  struct Go {  // a failed assertion still lets the service answer (the future waits for it)
+    std::atomic<bool>& go;
+    ~Go() { go = true; }
+  } release{go};
   while (!entered && answer.wait_for(0s) != std::future_status::ready) std::this_thread::yield();
   go = true;
   const auto got = answer.get();

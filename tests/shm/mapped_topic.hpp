@@ -7,10 +7,12 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/segment.hpp"
+#include "support/within.hpp"
 
 namespace prime::test {
 
@@ -79,12 +81,7 @@ class MappedTopic {
 
   template <class Condition>
   static bool within(std::chrono::milliseconds timeout, Condition condition) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (!condition()) {
-      if (std::chrono::steady_clock::now() > deadline) return false;
-      std::this_thread::yield();
-    }
-    return true;
+    return test::within(timeout, std::move(condition));
   }
 
  private:

@@ -24,6 +24,7 @@
 #include "shm/mapped_topic.hpp"
 #include "shm/messages.hpp"
 #include "shm/peer_process.hpp"
+#include "support/within.hpp"
 
 namespace prime::test {
 namespace {
@@ -58,17 +59,6 @@ std::vector<std::string> as_nobody(std::vector<std::string> argv) {
 Run prime_as_nobody(std::vector<std::string> args) {
   args.insert(args.begin(), PRIME_TOOL_PATH);
   return finished(as_nobody(std::move(args)));
-}
-
-// Whether `condition` holds within `timeout`, looked at every millisecond.
-template <class Condition>
-bool within(std::chrono::milliseconds timeout, Condition condition) {
-  const auto end = Clock::now() + timeout;
-  while (!condition()) {
-    if (Clock::now() >= end) return false;
-    std::this_thread::sleep_for(1ms);
-  }
-  return true;
 }
 
 // The last line of `text` that starts with '{' or '[', as JSON.
@@ -416,6 +406,13 @@ TEST(PrimeTool, CtrlCEndsAnUnfinishedCommandWith130AndAnOpenEndedOneWith0) {
   const auto domain = unique_domain("tool-ctrl-c");
   shm::Core core{domain};
   std::atomic<bool> called{false}, released{false};
+  struct Release {  // a failed assertion still lets the service answer (the core joins it)
+    std::atomic<bool>& released;
+    ~Release() {
+      released = true;
+      released.notify_all();
+    }
+  } release{released};
   auto slow = core.serve("tool/slow", [&](const Ask& a) {
     called = true;
     released.wait(false);
@@ -558,8 +555,6 @@ TEST(PrimeTool, ObservingABlockTopicNeverSlowsItsPublisher) {
   EXPECT_EQ(reader.lost(), 0u);
 }
 
-// ls, and hz, bw, delay and echo on a source, as on a shared-memory topic
-// (the figures and --json are the same code for both).
 // Credentials reach a server that asks for them from the URL, or from the
 // environment (off the command line, where `ps` shows it); no output ever
 // shows the password.
@@ -584,6 +579,8 @@ TEST(PrimeTool, OptimusCredentialsComeFromTheUrlOrTheEnvironmentAndAreNeverShown
     EXPECT_EQ(run->out.find("s3cret"), std::string::npos) << "the password is shown: " << run->out;
 }
 
+// ls, and hz, bw, delay and echo on a source, as on a shared-memory topic
+// (the figures and --json are the same code for both).
 TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndTheWatchCommandsReadASource) {
   RedisServer server;
   const auto domain = unique_domain("tool-optimus");

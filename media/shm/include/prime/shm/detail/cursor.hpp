@@ -204,12 +204,13 @@ class Cursor {
     b.chunks.reserve(max);  // the steps that may throw: before anything is taken
     b.info.reserve(max);
     free_.pop_back();  // before anything retires more
+    auto none = [&] {  // nothing taken: the batch's place is free again
+      free_.push_back(index);
+      return std::optional<std::uint32_t>{};
+    };
     const auto places = topic_->places();
     for (std::uint64_t look = 0;; ++look) {
-      if (look > max_looks()) {  // bounded, as try_take
-        free_.push_back(index);
-        return std::nullopt;
-      }
+      if (look > max_looks()) return none();  // bounded, as try_take
       // Each sample's size and stamp are read beside the ring: before the
       // look at `lagging` that decides whether the cursor keeps the batch,
       // and before a hold's check (SampleInfo says why those orders).
@@ -219,10 +220,9 @@ class Cursor {
         const auto ahead = RingEntry::ahead(entry, seq);
         if (ahead != 0 || !places.names_chunk(entry)) {
           if (seq == next_ && ahead < 0) {  // nothing new
-            free_.push_back(index);
             caught_up();
             acknowledge_all();
-            return std::nullopt;
+            return none();
           }
           break;
         }
@@ -236,8 +236,7 @@ class Cursor {
       }
       if (b.chunks.empty()) {
         if (skip_overwritten()) continue;
-        free_.push_back(index);
-        return std::nullopt;
+        return none();
       }
       if (may_keep) keep_within_reach(next_ + b.chunks.size(), held);
       b.held = !covers(next_);  // after the ring entries' and infos' loads, and kept_end's store
@@ -253,10 +252,7 @@ class Cursor {
         }
       }
       if (!b.chunks.empty()) break;
-      if (!skip_overwritten()) {
-        free_.push_back(index);
-        return std::nullopt;
-      }
+      if (!skip_overwritten()) return none();
     }
     b.first = next_;
     b.pinned = false;
