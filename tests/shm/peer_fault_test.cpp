@@ -15,6 +15,7 @@
 
 #include "prime/shm.hpp"
 #include "shm/domain.hpp"
+#include "support/futex_calls.hpp"
 #include "shm/mapped_topic.hpp"
 #include "shm/peer_process.hpp"
 
@@ -67,9 +68,9 @@ TEST(ShmPeerFaults, ASubscriberKilledAsleepCostsLaterPublishesNothing) {
   sleeper.kill9();
 
   std::uint64_t n = 0;
-  const auto calls = shm::detail::futex_syscalls.load();
+  const auto calls = futex_calls();
   for (int i = 0; i < 100000; ++i) ASSERT_TRUE(publisher.publish(n++));
-  EXPECT_LT(shm::detail::futex_syscalls.load() - calls, 100u) << "system calls in 100,000 publishes after the sleeper died";
+  EXPECT_LT(futex_calls() - calls, 100u) << "system calls in 100,000 publishes after the sleeper died";
 
   const auto costs = compare(1.2, [&] { (void)publisher.publish(n++); }, [&] { (void)untouched.publish(n++); });
   if (kTimingMeansSomething) {
@@ -97,12 +98,12 @@ TEST(ShmPeerFaults, ABlockPublisherKilledAsleepCostsItsSuccessorNothing) {
   auto fresh = core.subscribe<std::uint64_t>("fresh", {}, qos).subscribe();
 
   std::uint64_t n = 0;
-  const auto calls = shm::detail::futex_syscalls.load();
+  const auto calls = futex_calls();
   for (int i = 0; i < 100000; ++i) {
     ASSERT_TRUE(successor.publish(n++));
     ASSERT_TRUE(reader.try_read());
   }
-  EXPECT_LT(shm::detail::futex_syscalls.load() - calls, 100u) << "system calls in 100,000 messages after the publisher died asleep";
+  EXPECT_LT(futex_calls() - calls, 100u) << "system calls in 100,000 messages after the publisher died asleep";
 
   const auto costs = compare(
       1.2,

@@ -15,9 +15,6 @@ namespace prime::shm::detail {
 
 static_assert(sizeof(std::atomic<std::uint32_t>) == sizeof(std::uint32_t), "a futex word is a plain 32-bit word");
 
-// Futex system calls this process made, for tests that prove a path makes none.
-inline std::atomic<std::uint64_t> futex_syscalls{0};
-
 // Sleeps while `word` holds `expected`, until woken or `until` (steady_clock,
 // which is CLOCK_MONOTONIC: the same clock in every process). The word may
 // live in shared memory, so this is the process-shared (not FUTEX_PRIVATE) form.
@@ -31,7 +28,6 @@ inline void futex_wait(std::atomic<std::uint32_t>& word, std::uint32_t expected,
     at = {static_cast<time_t>(s.count()), static_cast<long>(std::chrono::nanoseconds{since - s}.count())};
     deadline = &at;
   }
-  futex_syscalls.fetch_add(1, std::memory_order_relaxed);
   // An absolute CLOCK_MONOTONIC deadline: a sleep interrupted and resumed does not drift.
   ::syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(&word), FUTEX_WAIT_BITSET, expected, deadline, nullptr,
             FUTEX_BITSET_MATCH_ANY);
@@ -39,7 +35,6 @@ inline void futex_wait(std::atomic<std::uint32_t>& word, std::uint32_t expected,
 
 // Wakes every sleeper on `word`; returns how many there were.
 inline long futex_wake_all(std::atomic<std::uint32_t>& word) {
-  futex_syscalls.fetch_add(1, std::memory_order_relaxed);
   return ::syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(&word), FUTEX_WAKE, INT_MAX, nullptr, nullptr, 0);
 }
 
