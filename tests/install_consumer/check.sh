@@ -58,3 +58,15 @@ echo "all: every component loaded"
 not_found shm_without_boost "Boost" -DPRIME_COMPONENTS=shm "$hide_boost"
 not_found optimus_without_hiredis "hiredis" -DPRIME_COMPONENTS=optimus "$hide_hiredis"
 echo "find_package(prime) consumers built and ran"
+
+# The installed prime finds its benchmarks where they are installed, and
+# names that place when they are not there (a build without the benchmarks).
+bench=$work/prefix/libexec/prime/bench
+if [[ -d $build/bench ]]; then
+  [[ -x $bench/ipc/prime_ipc && -x $bench/prime_table1 ]] || fail "the benchmarks are not installed in $bench" ""
+  mv "$bench" "$work/moved"
+  env -u PRIME_BENCH_DIR "$work/prefix/bin/prime" bench --out "$work/report" >"$work/bench.log" 2>&1 && status=0 || status=$?
+  [[ $status -eq 2 ]] || fail "prime bench without its benchmarks exited $status, not 2" "$work/bench.log"
+  grep -q "in $bench or" "$work/bench.log" || fail "prime bench does not name $bench" "$work/bench.log"
+  echo "prime bench: looks for its benchmarks in $bench"
+fi

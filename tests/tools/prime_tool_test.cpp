@@ -117,6 +117,14 @@ TEST(PrimeTool, LsAndInfoShowATopicAndAServiceOfRunningPeersWithTypesAndPids) {
   EXPECT_NE(ls.out.find("peer-ticks (" + std::to_string(ticks.pid()) + ")"), std::string::npos) << ls.out;
   EXPECT_NE(ls.out.find("peer-serve (" + std::to_string(server.pid()) + ")"), std::string::npos) << ls.out;
 
+  // The global options may follow the subcommand, in any order.
+  const auto after = finished({PRIME_TOOL_PATH, "ls", "--json", "--domain", domain});
+  EXPECT_EQ(after.code, 0) << after.out;
+  EXPECT_EQ(text(last_json(after.out).object().at("topics").array().at(0), "name"), "tool/ticks") << after.out;
+  const auto info_after = finished({PRIME_TOOL_PATH, "info", "tool/ticks", "--domain", domain});
+  EXPECT_EQ(info_after.code, 0) << info_after.out;
+  EXPECT_NE(info_after.out.find("prime::test::Tick"), std::string::npos) << info_after.out;
+
   const auto json = last_json(prime(domain, {"--json", "ls"}).out);
   const auto& topics = json.object().at("topics").array();
   ASSERT_EQ(topics.size(), 1u);

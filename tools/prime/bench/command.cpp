@@ -9,7 +9,9 @@
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <cstdlib>
 #include <exception>
+#include <filesystem>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -206,14 +208,30 @@ Results medians(const std::vector<Results>& rounds) {
   return out;
 }
 
+// Where the benchmark binaries are: --bin-dir, $PRIME_BENCH_DIR, or beside
+// this prime: installed (<prefix>/libexec/prime/bench, from <prefix>/bin) or
+// in its build tree (<build>/bench, from <build>/tools/prime). Empty, with
+// what was tried said, where none holds them.
+std::filesystem::path benchmark_folder(const Options& options) {
+  if (!options.bin_dir.empty()) return options.bin_dir;
+  if (const char* env = std::getenv("PRIME_BENCH_DIR"); env && *env) return env;
+  std::error_code error;
+  const auto self = std::filesystem::read_symlink("/proc/self/exe", error).parent_path();
+  const std::filesystem::path places[] = {self / ".." / "libexec" / "prime" / "bench", self / ".." / ".." / "bench"};
+  const auto first = suites().front().binary;
+  for (const auto& place : places)
+    if (std::filesystem::is_regular_file(place / first, error)) return place.lexically_normal();
+  std::cerr << "prime bench: no benchmark binaries (" << first << ") in " << places[0].lexically_normal().string()
+            << " or " << places[1].lexically_normal().string()
+            << ": this prime was built or installed without the benchmarks; pass --bin-dir or set PRIME_BENCH_DIR\n";
+  return {};
+}
+
 }  // namespace
 
 int run(const Options& options) {
-  const std::filesystem::path bin_dir = options.bin_dir;
-  if (bin_dir.empty()) {
-    std::cerr << "prime bench: no benchmark directory: this prime was built without the benchmarks; pass --bin-dir\n";
-    return 2;
-  }
+  const std::filesystem::path bin_dir = benchmark_folder(options);
+  if (bin_dir.empty()) return 2;
   const std::filesystem::path out = options.out;
   const auto raw = out / "raw";
   std::filesystem::create_directories(raw);

@@ -10,7 +10,7 @@ namespace prime::tool::bench {
 struct Options {
   bool quick = false;   // a short run of the main figures (under two minutes on 2 cores)
   std::string out;      // the report folder
-  std::string bin_dir;  // where the benchmark binaries are (the build's bench/ folder)
+  std::string bin_dir;  // where the benchmark binaries are (empty: found beside the tool)
 };
 
 // Exit code: 0 with figures written, 1 if nothing could be measured or Ctrl-C
