@@ -26,6 +26,14 @@ constexpr std::size_t kReplySize = sizeof(std::uint64_t);
 
 shm::ClientQos client_qos() { return {.timeout = av::kCallTimeout, .wait_for_service = 10s}; }
 
+// A call the service turned away (its queue, its clients or its rate were
+// at their limits) or that timed out: counted as refused, not a failure.
+bool refused(prime::Errc code) {
+  using prime::Errc;
+  return code == Errc::queue_full || code == Errc::too_many_clients || code == Errc::rate_limited ||
+         code == Errc::timeout;
+}
+
 std::string_view as_text(std::span<const std::byte> bytes) {
   return {reinterpret_cast<const char*>(bytes.data()), bytes.size()};
 }
@@ -76,7 +84,7 @@ void extra_client(ipc::Child& self) {
   av::call_at_random_intervals(self, [&](std::uint64_t seq) {
     av::set_header(request, {.from = av::Header::kExtra, .seq = seq, .sent_ns = av::now_ns()});
     auto got = call(service, request);
-    if (!got && got.error().code != prime::Errc::limit_exceeded && got.error().code != prime::Errc::timeout)
+    if (!got && !refused(got.error().code))
       throw ipc::PeerError{"extra client: " + got.error().describe()};
   });
 }
@@ -149,7 +157,7 @@ void BM_Availability_Shm(benchmark::State& state) {
           auto posted = service.post(as_bytes(request));
           if (posted) return std::optional<std::string>{};
           const auto code = posted.error().code;
-          if (code == prime::Errc::limit_exceeded || code == prime::Errc::timeout)
+          if (refused(code))
             return std::optional<std::string>{posted.error().describe()};  // refused
           throw ipc::PeerError{"shm service: " + posted.error().describe()};
         },

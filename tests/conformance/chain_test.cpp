@@ -99,13 +99,13 @@ TYPED_TEST(ChainTest, RepeatThatNeverEndsIsAnErrorNotAHang) {
   auto& core = *this->core;
   auto stuck = repeat(core, this->chain([](int x) { return x; }), [](const int&) { return false; },
                       RepeatLimits{.max_iterations = 1000});
-  EXPECT_TRUE(fails_with([&] { (void)stuck(1); }, Errc::limit_exceeded, "1000 iterations"));
+  EXPECT_TRUE(fails_with([&] { (void)stuck(1); }, Errc::iteration_limit, "1000 iterations"));
 }
 
 TYPED_TEST(ChainTest, ARepeatAllowedNoIterationIsRefusedByName) {
   auto& core = *this->core;
   EXPECT_TRUE(fails_with([&] { (void)repeat(core, this->chain(twice), [](const int&) { return true; }, RepeatLimits{.max_iterations = 0}, "grow"); },
-                         Errc::limit_exceeded, "repeat 'grow': max_iterations must be at least 1"));
+                         Errc::invalid_argument, "repeat 'grow': max_iterations must be at least 1"));
 }
 
 TYPED_TEST(ChainTest, ForkTeesEveryOutputIntoASource) {

@@ -129,10 +129,10 @@ TYPED_TEST(SourceTest, LatestSkipsToTheNewestAndKeepsIt) {
 
 TYPED_TEST(SourceTest, ABufferOfNoCapacityIsRefusedByName) {
   Event<int> event;
-  EXPECT_TRUE(fails_with([&] { (void)this->core->source(event, "lidar", {.capacity = 0}); }, Errc::limit_exceeded,
+  EXPECT_TRUE(fails_with([&] { (void)this->core->source(event, "lidar", {.capacity = 0}); }, Errc::invalid_argument,
                          "source 'lidar': capacity must be at least 1"));
   auto source = this->core->source(event, "odom");
-  EXPECT_TRUE(fails_with([&] { (void)source.subscribe({.capacity = 0}); }, Errc::limit_exceeded, "source 'odom'"));
+  EXPECT_TRUE(fails_with([&] { (void)source.subscribe({.capacity = 0}); }, Errc::invalid_argument, "source 'odom'"));
 }
 
 TYPED_TEST(SourceTest, BlockingReadTimesOutAtItsDeadline) {
@@ -394,7 +394,7 @@ TYPED_TEST(SourceTest, ASyncThatWouldKeepNoValueIsRefusedByName) {
     (void)sync(none, lidar.source, odom.source);
     ADD_FAILURE() << "a depth of 0 was taken";
   } catch (const Failure& f) {
-    EXPECT_EQ(f.error().code, Errc::limit_exceeded);
+    EXPECT_EQ(f.error().code, Errc::invalid_argument);
     EXPECT_NE(f.error().message.find("a depth of 0"), std::string::npos) << f.error().message;
   }
 }

@@ -125,7 +125,7 @@ TEST_F(OptimusCore, AMessageLongerThanTheServerTakesIsRefusedByNameAndLosesNothi
   const std::string fine = "ok";
   const auto refused = [](const std::expected<void, Error>& done, std::string_view what) {
     if (done) return ::testing::AssertionFailure() << "not refused";
-    if (done.error().code != Errc::limit_exceeded || done.error().message.find(what) == std::string::npos ||
+    if (done.error().code != Errc::too_large || done.error().message.find(what) == std::string::npos ||
         done.error().message.find("proto-max-bulk-len, 1048576 bytes") == std::string::npos)
       return ::testing::AssertionFailure() << done.error().describe();
     return ::testing::AssertionSuccess();

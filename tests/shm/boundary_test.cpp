@@ -76,7 +76,7 @@ TEST_F(Boundary, LinkingServicesWhoseTypesDifferIsRefusedWhenLinked) {
   EXPECT_EQ(answer.value, sizeof(Large));
   const auto too_big = shm::link(core.raw_chain("a"), core.raw_chain("tiny")).call(std::as_bytes(std::span{&seven, 1}));
   ASSERT_FALSE(too_big);
-  EXPECT_EQ(too_big.error().code, Errc::limit_exceeded) << too_big.error().describe();
+  EXPECT_EQ(too_big.error().code, Errc::too_large) << too_big.error().describe();
 }
 
 // A service whose header says its cells are smaller than its types (a
@@ -138,11 +138,11 @@ TEST(BoundarySegments, ASegmentOfAnotherUserOrWithAWiderModeIsRefused) {
 // could not read it back from /dev/shm) is refused, as is a name holding a
 // NUL (never found again in the registry: a new entry on every open).
 TEST(BoundaryNames, ADomainTooLongToReadBackAndANameWithANulAreRefused) {
-  EXPECT_TRUE(fails_with([] { shm::Core core{unique_domain("long") + std::string(220, 'x')}; }, Errc::limit_exceeded,
+  EXPECT_TRUE(fails_with([] { shm::Core core{unique_domain("long") + std::string(220, 'x')}; }, Errc::invalid_argument,
                          "too long (2"));
   shm::Core core{unique_domain("nul")};
   const std::string with_nul{"a\0b", 3};
-  EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>(with_nul); }, Errc::limit_exceeded, "no control character"));
+  EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>(with_nul); }, Errc::invalid_argument, "no control character"));
   EXPECT_TRUE(core.registry().topics.empty());
 }
 
@@ -240,17 +240,17 @@ TEST_F(Boundary, DamageReachesErrorsOnceAndAWorkerReadsOn) {
 // had its publisher write outside its segment).
 TEST_F(Boundary, QosSizesThatWouldWrapAroundAreRefused) {
   EXPECT_TRUE(fails_with([&] { (void)core.publisher<shm::Bytes>("huge", {.capacity = 54, .max_message_size = (1ull << 58) - 128}); },
-                         Errc::limit_exceeded, "topic 'huge': QoS out of bounds"));
+                         Errc::invalid_argument, "topic 'huge': QoS out of bounds"));
   EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>("held", {.max_held = std::size_t{1} << 40}); },
-                         Errc::limit_exceeded, "max_held 1099511627776"));
+                         Errc::invalid_argument, "max_held 1099511627776"));
   EXPECT_TRUE(fails_with([&] { (void)core.publisher<int>("ring", {.capacity = std::size_t{1} << 40}); },
-                         Errc::limit_exceeded, "a capacity of 1099511627776"));
+                         Errc::invalid_argument, "a capacity of 1099511627776"));
   EXPECT_TRUE(fails_with(
       [&] {
         (void)core.serve("echo", [](std::span<const std::byte> b) { return std::vector<std::byte>(b.begin(), b.end()); },
                          {.max_request_size = std::numeric_limits<std::size_t>::max() - 10, .max_reply_size = 64});
       },
-      Errc::limit_exceeded, "service 'echo': QoS out of bounds: requests of 18446744073709551605 bytes"));
+      Errc::invalid_argument, "service 'echo': QoS out of bounds: requests of 18446744073709551605 bytes"));
   EXPECT_EQ(segments_of(core.domain()), 1) << "nothing but the registry was made";
 }
 

@@ -345,7 +345,7 @@ TEST_F(ServiceTest, LimitsAreErrorsThatNameTheLimitAndTheService) {
   EXPECT_EQ(bytes(hundred), hundred);
   auto oversized = bytes.call(more);
   ASSERT_FALSE(oversized);
-  EXPECT_EQ(oversized.error().code, Errc::limit_exceeded);
+  EXPECT_EQ(oversized.error().code, Errc::too_large);
   EXPECT_NE(oversized.error().message.find("exceeds max_request_size (100 bytes)"), std::string::npos)
       << oversized.error().message;
 
@@ -353,7 +353,7 @@ TEST_F(ServiceTest, LimitsAreErrorsThatNameTheLimitAndTheService) {
   ASSERT_TRUE(second.call(hundred));
   auto third = core.chain<shm::Bytes, shm::Bytes>("bytes").call(hundred);
   ASSERT_FALSE(third);
-  EXPECT_EQ(third.error().code, Errc::limit_exceeded);
+  EXPECT_EQ(third.error().code, Errc::too_many_clients);
   EXPECT_NE(third.error().message.find("service 'bytes' has its maximum of 2 clients (max_clients)"), std::string::npos)
       << third.error().message;
 
@@ -362,7 +362,7 @@ TEST_F(ServiceTest, LimitsAreErrorsThatNameTheLimitAndTheService) {
   ASSERT_TRUE(rate.call(1));
   auto soon = rate.call(2);
   ASSERT_FALSE(soon);
-  EXPECT_EQ(soon.error().code, Errc::limit_exceeded);
+  EXPECT_EQ(soon.error().code, Errc::rate_limited);
   EXPECT_NE(soon.error().message.find("service 'rate': a client sends at most one request every 10000000 us (min_interval)"),
             std::string::npos)
       << soon.error().message;
@@ -389,7 +389,7 @@ TEST_F(ServiceTest, AFullQueueAndTooManyCallsInFlightAreRefusedByName) {
   ASSERT_TRUE(first.post(2)) << "the second waits in the queue";
   auto third = first.post(3);
   ASSERT_FALSE(third);
-  EXPECT_EQ(third.error().code, Errc::limit_exceeded);
+  EXPECT_EQ(third.error().code, Errc::queue_full);
   EXPECT_NE(third.error().message.find("service 'busy': this client has 2 calls in flight already (calls_per_client)"),
             std::string::npos)
       << third.error().message;
@@ -397,6 +397,7 @@ TEST_F(ServiceTest, AFullQueueAndTooManyCallsInFlightAreRefusedByName) {
   ASSERT_TRUE(other.post(4)) << "another client's waits in the queue too";
   auto full = other.post(5);
   ASSERT_FALSE(full);
+  EXPECT_EQ(full.error().code, Errc::queue_full);
   EXPECT_NE(full.error().message.find("service 'busy': 2 requests wait for a worker already (queue_depth)"),
             std::string::npos)
       << full.error().message;

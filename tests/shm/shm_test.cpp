@@ -89,14 +89,14 @@ TEST_F(ShmTest, AReaderKeepsToItsMaxHeldSoThePublisherNeverRunsShort) {
   EXPECT_EQ(*hoard[1], 1);
   auto said = errors.try_read();
   ASSERT_TRUE(said) << "reading past the budget is reported";
-  EXPECT_EQ(said->value.code, Errc::limit_exceeded);
+  EXPECT_EQ(said->value.code, Errc::held_limit);
   EXPECT_NE(said->value.message.find("topic 'greedy': a reader holds its max_held of 2 samples"), std::string::npos)
       << said->value.message;
   EXPECT_FALSE(errors.try_read()) << "once, not on every read";
 
   auto waited = reader.read_for(20ms);
   ASSERT_FALSE(waited);
-  EXPECT_EQ(waited.error().code, Errc::limit_exceeded) << waited.error().describe();
+  EXPECT_EQ(waited.error().code, Errc::held_limit) << waited.error().describe();
 
   hoard.erase(hoard.begin());  // release one
   auto next = reader.try_read();
@@ -315,7 +315,7 @@ TEST_F(ShmTest, BoundedTypesCarryVariableContent) {
   EXPECT_EQ(scan->value->frame, "laser_front");
   ASSERT_EQ(scan->value->ranges.size(), 360u);
   EXPECT_FLOAT_EQ(scan->value->ranges[359], 35.9f);
-  EXPECT_TRUE(fails_with([] { bounded_string<4> too_long{"laser"}; }, Errc::limit_exceeded, "bounded_string<4>"));
+  EXPECT_TRUE(fails_with([] { bounded_string<4> too_long{"laser"}; }, Errc::too_large, "bounded_string<4>"));
 }
 
 TEST_F(ShmTest, RawByteTopicsCarryMessagesUpToTheirMaximum) {
@@ -335,7 +335,7 @@ TEST_F(ShmTest, RawByteTopicsCarryMessagesUpToTheirMaximum) {
 
   auto oversized = publisher.loan(kMax + 1);
   ASSERT_FALSE(oversized);
-  EXPECT_EQ(oversized.error().code, Errc::limit_exceeded);
+  EXPECT_EQ(oversized.error().code, Errc::too_large);
   EXPECT_NE(oversized.error().message.find("camera"), std::string::npos);
   EXPECT_NE(oversized.error().message.find(std::to_string(kMax + 1) + " bytes exceeds its maximum of " +
                                            std::to_string(kMax)),
@@ -676,7 +676,7 @@ TEST_F(ShmTest, EveryLoanOutTakesItsPlaceInTheRing) {
   EXPECT_EQ(batch->size(), 2u) << "the ring's other places are loaned out";
   auto beyond = publisher.loan();
   ASSERT_FALSE(beyond) << "4 loans out on a ring of 4";
-  EXPECT_EQ(beyond.error().code, Errc::limit_exceeded);
+  EXPECT_EQ(beyond.error().code, Errc::queue_full);
   EXPECT_NE(beyond.error().message.find("all 4 places of its ring are loaned out"), std::string::npos)
       << beyond.error().message;
   **last_place = 3;
@@ -723,7 +723,7 @@ TEST_F(ShmTest, UnderDropOldestLoansOutAreBoundedByTheChunksNotTheRing) {
     ASSERT_LE(out.size(), 8u) << "the topic has 4 chunks";
   }
   EXPECT_GE(out.size(), 2u);
-  EXPECT_EQ(refused->code, Errc::limit_exceeded);
+  EXPECT_EQ(refused->code, Errc::queue_full);
   EXPECT_NE(refused->message.find("this publisher has " + std::to_string(out.size()) + " loaned out"), std::string::npos)
       << refused->message;
   out.pop_back();  // dropped unpublished: its chunk is free again
@@ -807,7 +807,7 @@ TEST_F(ShmTest, ABatchNeedsOneStampPerSlotAndMayOutliveItsPublisher) {
   }
   for (std::size_t i = 0; i < batch->size(); ++i) (*batch)[i] = 40 + static_cast<int>(i);
   const std::vector<Clock::time_point> two(2, Clock::now());
-  EXPECT_TRUE(fails_with([&] { std::move(*batch).publish(two); }, Errc::limit_exceeded, "3 slots published with 2 stamps"));
+  EXPECT_TRUE(fails_with([&] { std::move(*batch).publish(two); }, Errc::invalid_argument, "3 slots published with 2 stamps"));
   std::move(*batch).publish();
   batch.reset();
   for (int expected = 40; expected < 43; ++expected) {
@@ -884,7 +884,7 @@ TEST_F(ShmTest, SubscribersBeyondTheMaximumAreRefused) {
   auto topic = core.subscribe<int>("busy", {}, {.max_subscribers = 2});
   auto a = topic.subscribe();
   auto b = topic.subscribe();
-  EXPECT_TRUE(fails_with([&] { (void)topic.subscribe(); }, Errc::limit_exceeded,
+  EXPECT_TRUE(fails_with([&] { (void)topic.subscribe(); }, Errc::too_many_subscribers,
                          "topic 'busy' has its maximum of 2 subscribers"));
   { auto gone = std::move(a); }
   EXPECT_NO_THROW((void)topic.subscribe()) << "a subscriber that leaves frees its slot";
@@ -968,10 +968,10 @@ TEST_F(ShmTest, ASyncOfTopicsHoldsNoMoreThanTheirMaxHeld) {
   }
   EXPECT_TRUE(fails_with([&] { (void)sync(exact_time, core.subscribe<int>("sync/lidar", {}, qos),
                                           core.subscribe<int>("thin", {}, {.max_held = 2})); },
-                         Errc::limit_exceeded, "source 'thin' lets a reader hold 2 values (max_held); a sync needs at least 4"));
+                         Errc::invalid_argument, "source 'thin' lets a reader hold 2 values (max_held); a sync needs at least 4"));
   EXPECT_TRUE(fails_with([&] { (void)sync(exact_time, core.subscribe<int>("sync/lidar", {}, qos),
                                           core.subscribe<int>("thinnest", {}, {.max_held = 1})); },
-                         Errc::limit_exceeded, "source 'thinnest' lets a reader hold 1 values (max_held); a sync needs at least 4"));
+                         Errc::invalid_argument, "source 'thinnest' lets a reader hold 1 values (max_held); a sync needs at least 4"));
 }
 
 TEST_F(ShmTest, TheRegistryListsParticipantsAndTopicsWithPidsAndQos) {

@@ -81,7 +81,7 @@ TEST_F(ViewsTest, BatchesCountAgainstMaxHeldUntilTheyEnd) {
   EXPECT_TRUE(batches.try_read(3).empty());
   auto waited = batches.read(3, Clock::now() + 10ms);
   ASSERT_FALSE(waited);
-  EXPECT_EQ(waited.error().code, Errc::limit_exceeded) << waited.error().describe();
+  EXPECT_EQ(waited.error().code, Errc::held_limit) << waited.error().describe();
   a = {};
   auto c = batches.try_read(10);
   ASSERT_EQ(c.size(), 3u);

@@ -70,6 +70,7 @@ int exit_for(prime::Errc code) {
     case prime::Errc::not_found: return kNotFound;
     case prime::Errc::timeout: return kNothing;
     case prime::Errc::unreachable: return kUnreachable;
+    case prime::Errc::invalid_argument: return kUsage;  // a name or value from the command line
     default: return kFailed;
   }
 }
@@ -79,6 +80,7 @@ int exit_for(prime::Errc code) {
 int main(int argc, char** argv) {
   CLI::App app{"prime: see a running Prime system — its processes, topics and services — and drive it"};
   app.require_subcommand(1);
+  app.fallthrough();  // the global options after the subcommand too: `prime hz lidar --domain robot`
   Options o;
   if (const char* env = std::getenv("PRIME_DOMAIN"); env && *env) o.domain = env;
   app.add_option("--domain", o.domain, "the domain (default: $PRIME_DOMAIN, or robot)");
@@ -151,9 +153,6 @@ int main(int argc, char** argv) {
   command("clean", "remove what dead participants left; never touches a live one's", [&] { return shm_clean(o); })
       ->add_flag("--all", o.all, "every domain on this machine, not only --domain");
   bench::Options b;
-#ifdef PRIME_BENCH_DIR
-  b.bin_dir = PRIME_BENCH_DIR;
-#endif
   auto* bench = command("bench", "measure what each hop costs, against the floors and the peers: a report folder",
                         [&] {
                           if (b.out.empty()) b.out = bench_folder_name();
@@ -161,7 +160,7 @@ int main(int argc, char** argv) {
                         });
   bench->add_flag("--quick", b.quick, "the main figures only, in under two minutes");
   bench->add_option("--out", b.out, "the report folder (default: prime-bench-<date>-<time>)");
-  bench->add_option("--bin-dir", b.bin_dir, "where the benchmark binaries are (default: this build's bench/)");
+  bench->add_option("--bin-dir", b.bin_dir, "where the benchmark binaries are (default: $PRIME_BENCH_DIR, or beside this prime: installed or built)");
 
   try {
     app.parse(argc, argv);

@@ -61,7 +61,7 @@ class Hub {
     auto queue = std::make_shared<Queue<T>>(qos);
     std::scoped_lock lock{mutex_};
     if (!std::copy_constructible<T> && !readers_->empty())
-      throw Failure{{Errc::limit_exceeded, "source '" + name_ + "' carries a move-only type: it can have one reader only"}};
+      throw Failure{{Errc::invalid_argument, "source '" + name_ + "' carries a move-only type: it can have one reader only"}};
     auto next = std::make_shared<List>(*readers_);
     next->push_back(queue);
     readers_ = std::move(next);

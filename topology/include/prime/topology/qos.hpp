@@ -40,7 +40,7 @@ struct Qos {
 // Throws when `qos` cannot make a buffer, naming the source `name`: every
 // medium's sources check their QoS here.
 inline void validate(const Qos& qos, const std::string& name) {
-  if (qos.capacity == 0) throw Failure{{Errc::limit_exceeded, "source '" + name + "': capacity must be at least 1"}};
+  if (qos.capacity == 0) throw Failure{{Errc::invalid_argument, "source '" + name + "': capacity must be at least 1"}};
 }
 
 }  // namespace prime

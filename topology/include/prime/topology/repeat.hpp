@@ -27,14 +27,14 @@ struct RepeatLimits {
 namespace detail {
 
 inline Failure too_many_iterations(const std::string& name, std::size_t max) {
-  return Failure{{Errc::limit_exceeded,
+  return Failure{{Errc::iteration_limit,
                   "repeat '" + name + "': condition not met after " + std::to_string(max) + " iterations"}};
 }
 
 // A loop allowed no iteration could not run its body even once.
 inline void check(const RepeatLimits& limits, const std::string& name) {
   if (limits.max_iterations == 0)
-    throw Failure{{Errc::limit_exceeded, "repeat '" + name + "': max_iterations must be at least 1 (the body runs at least once)"}};
+    throw Failure{{Errc::invalid_argument, "repeat '" + name + "': max_iterations must be at least 1 (the body runs at least once)"}};
 }
 
 template <class Body, class Until>

@@ -268,7 +268,7 @@ struct SyncBudget {
     if (qos.max_held == 0) return wanted;
     const auto others = 2 + queued_sets;  // one being read, one the reader holds, those queued for it
     if (qos.max_held <= others)
-      throw Failure{{Errc::limit_exceeded,
+      throw Failure{{Errc::invalid_argument,
                      sync + ": source '" + source + "' lets a reader hold " + std::to_string(qos.max_held) +
                          " values (max_held); a sync needs at least " + std::to_string(others + 1) +
                          ": one waiting for a match, one being read, " + std::to_string(queued_sets) +
@@ -293,7 +293,7 @@ auto start_sync(SyncPolicy policy, std::index_sequence<I...>, const S&... source
   ((name += (I == 0 ? "" : ", ") + sources.name()), ...);
   name += ")";
   if (policy.depth == 0 && policy.kind != SyncPolicy::Kind::latest_of_each)
-    throw Failure{{Errc::limit_exceeded, name + ": a depth of 0 keeps no value to match (at least 1)"}};
+    throw Failure{{Errc::invalid_argument, name + ": a depth of 0 keeps no value to match (at least 1)"}};
   const auto budget = SyncBudget::of({sources.qos().max_held...});
   const std::array<std::size_t, sizeof...(S)> depths{budget.depth(policy.depth, sources.qos(), name, sources.name())...};
   Graph graph = Graph::sequence(Graph::parallel({&sources.graph()...}), Graph::node(name, "sync", runtime->medium()));

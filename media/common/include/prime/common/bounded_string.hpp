@@ -23,7 +23,7 @@ class bounded_string {
 
  public:
   constexpr bounded_string() noexcept = default;
-  // Throws Failure{limit_exceeded} when `text` is longer than N.
+  // Throws Failure{too_large} when `text` is longer than N.
   constexpr bounded_string(std::string_view text) { assign(text); }  // NOLINT: converts like std::string
 
   constexpr bounded_string& operator=(std::string_view text) {
@@ -33,7 +33,7 @@ class bounded_string {
 
   constexpr void assign(std::string_view text) {
     if (text.size() > N)
-      throw Failure{{Errc::limit_exceeded, "bounded_string<" + std::to_string(N) + ">: text of " +
+      throw Failure{{Errc::too_large, "bounded_string<" + std::to_string(N) + ">: text of " +
                                                std::to_string(text.size()) + " characters does not fit"}};
     std::copy(text.begin(), text.end(), data_);
     size_ = static_cast<std::uint32_t>(text.size());

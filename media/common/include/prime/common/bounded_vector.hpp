@@ -31,7 +31,7 @@ class bounded_vector {
   using const_iterator = const T*;
 
   constexpr bounded_vector() noexcept = default;
-  // Throws Failure{limit_exceeded} when there are more than N values.
+  // Throws Failure{too_large} when there are more than N values.
   constexpr bounded_vector(std::initializer_list<T> values) { assign(values.begin(), values.end()); }
   constexpr explicit bounded_vector(std::span<const T> values) { assign(values.begin(), values.end()); }
 
@@ -43,7 +43,7 @@ class bounded_vector {
     size_ = n;
   }
 
-  // Appends, or throws Failure{limit_exceeded} when full.
+  // Appends, or throws Failure{too_large} when full.
   constexpr void push_back(const T& value) {
     if (!try_push_back(value)) throw overflow(size_ + 1);
   }
@@ -53,7 +53,7 @@ class bounded_vector {
     size_ = size() + 1;
     return true;
   }
-  // Throws Failure{limit_exceeded} when n > N. New values are value-initialised.
+  // Throws Failure{too_large} when n > N. New values are value-initialised.
   constexpr void resize(std::size_t n) {
     if (n > N) throw overflow(n);
     for (auto i = size(); i < n; ++i) items_[i] = T{};
@@ -91,7 +91,7 @@ class bounded_vector {
 
  private:
   static Failure overflow(std::size_t n) {
-    return Failure{{Errc::limit_exceeded, "bounded_vector<" + std::to_string(N) + ">: " + std::to_string(n) +
+    return Failure{{Errc::too_large, "bounded_vector<" + std::to_string(N) + ">: " + std::to_string(n) +
                                               " values do not fit"}};
   }
 

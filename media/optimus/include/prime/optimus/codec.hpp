@@ -199,7 +199,7 @@ void encode_message(const T& value, std::string& out) {
   out.resize(start + detail::kHeaderSize);
   Codec<T>::encode(value, out);
   const auto body = out.size() - start - detail::kHeaderSize;
-  if (body > UINT32_MAX) throw Failure{{Errc::limit_exceeded, "optimus: a " + fingerprint.describe() + " message of " + std::to_string(body) + " bytes is over 4 GiB"}};
+  if (body > UINT32_MAX) throw Failure{{Errc::too_large, "optimus: a " + fingerprint.describe() + " message of " + std::to_string(body) + " bytes is over 4 GiB"}};
   out[start] = 'P';
   out[start + 1] = 'O';
   out[start + 2] = static_cast<char>(detail::kVersion);

@@ -46,7 +46,7 @@ class Core : public Runtime, public ChainFactory<Core> {
   // Connects once to check the server: throws Errc::unreachable naming the URL.
   explicit Core(std::string url) : Core{Options{.url = std::move(url)}} {}
   explicit Core(Options options) : Runtime{"optimus"}, options_{std::move(options)}, pool_{detail::Pool::make(options_)} {
-    if (options_.domain.empty()) throw Failure{{Errc::limit_exceeded, "optimus: the domain (key prefix) must not be empty"}};
+    if (options_.domain.empty()) throw Failure{{Errc::invalid_argument, "optimus: the domain (key prefix) must not be empty"}};
     auto lease = pool_->acquire();
     if (!lease) throw Failure{lease.error()};
     auto pong = (*lease)->command({"PING"});

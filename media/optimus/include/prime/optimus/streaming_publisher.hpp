@@ -35,7 +35,7 @@ std::vector<StreamState::Message> encoded(std::span<const Sample<T>> samples) {
 // `Publisher::publish_all`. A server error is the next call's error; so is
 // a dead connection, naming how many values may not have been appended.
 // After an error nothing is in flight, but for a batch refused before it
-// was sent (a message longer than the server takes: Errc::limit_exceeded),
+// was sent (a message longer than the server takes: Errc::too_large),
 // which leaves the one before in flight. `flush` waits for the batch in
 // flight; the destructor flushes, and reports an error to the core's
 // errors. A batch never waits for readers (drop_oldest, whatever the

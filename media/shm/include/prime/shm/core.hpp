@@ -37,7 +37,7 @@ namespace detail {
 // `qos` with its defaults filled in for messages of type `type`, or a
 // Failure naming the topic and what is wrong.
 inline TopicQos complete(const std::string& name, const Fingerprint& type, bool raw, TopicQos qos) {
-  auto refuse = [&](const std::string& why) { throw Failure{{Errc::limit_exceeded, "topic '" + name + "': " + why}}; };
+  auto refuse = [&](const std::string& why) { throw Failure{{Errc::invalid_argument, "topic '" + name + "': " + why}}; };
   if (raw && qos.max_message_size == 0) refuse("a raw byte topic needs max_message_size");
   if (qos.max_message_size == 0) qos.max_message_size = type.size;
   if (qos.max_message_size < type.size)
@@ -51,7 +51,7 @@ inline TopicQos complete(const std::string& name, const Fingerprint& type, bool 
 // or a Failure naming the service and what is wrong.
 inline ServiceQos complete(const std::string& name, const Fingerprint& request, bool raw_request, const Fingerprint& reply,
                            bool raw_reply, ServiceQos qos) {
-  auto refuse = [&](const std::string& why) { throw Failure{{Errc::limit_exceeded, "service '" + name + "': " + why}}; };
+  auto refuse = [&](const std::string& why) { throw Failure{{Errc::invalid_argument, "service '" + name + "': " + why}}; };
   if (raw_request && qos.max_request_size == 0) refuse("raw byte requests need max_request_size");
   if (raw_reply && qos.max_reply_size == 0) refuse("raw byte replies need max_reply_size");
   if (qos.max_request_size == 0) qos.max_request_size = request.size;
@@ -278,7 +278,7 @@ class Core : public ErasedChainRuntime {
   // a linked call, the next service's max_request_size (its output is
   // written straight into that service's request).
   static Failure reply_too_large(std::size_t size, std::size_t room) {
-    return Failure{{Errc::limit_exceeded, "a reply of " + std::to_string(size) + " bytes exceeds the " +
+    return Failure{{Errc::too_large, "a reply of " + std::to_string(size) + " bytes exceeds the " +
                                               std::to_string(room) + " bytes it may take (this service's max_reply_size, "
                                               "or in a linked call the next service's max_request_size)"}};
   }

@@ -146,7 +146,7 @@ class Batch {
   // Publishes every slot, slot i stamped stamps[i] (as many stamps as slots).
   void publish(std::span<const Clock::time_point> stamps) && {
     if (stamps.size() != chunks_.size())
-      throw Failure{{Errc::limit_exceeded, "topic '" + owner_->writer.topic()->name() + "': a batch of " +
+      throw Failure{{Errc::invalid_argument, "topic '" + owner_->writer.topic()->name() + "': a batch of " +
                                                  std::to_string(chunks_.size()) + " slots published with " +
                                                  std::to_string(stamps.size()) + " stamps"}};
     owner_->writer.publish_some(chunks_, size_, [&](std::size_t i) { return stamps[i]; });
@@ -206,8 +206,8 @@ class Publisher {
   // core.errors() and no longer waited for until it catches up. There,
   // every loan out (and every slot of a batch) takes its place in the ring:
   // the room waited for is after theirs, and a loan beyond the ring's
-  // capacity is Errc::limit_exceeded. Under drop_oldest, loans are bounded
-  // by the topic's spare chunks (Errc::limit_exceeded, saying how many are out).
+  // capacity is Errc::queue_full. Under drop_oldest, loans are bounded
+  // by the topic's spare chunks (Errc::queue_full, saying how many are out).
   [[nodiscard]] std::expected<Loan<T>, Error> loan() requires(!std::is_same_v<T, Bytes>) {
     auto chunk = owner_->writer.loan();
     if (!chunk) return std::unexpected(std::move(chunk.error()));
@@ -216,7 +216,7 @@ class Publisher {
   }
 
   // A slot of `size` bytes on a raw byte topic; a size over the topic's
-  // maximum is Errc::limit_exceeded, naming both.
+  // maximum is Errc::too_large, naming both.
   [[nodiscard]] std::expected<Loan<T>, Error> loan(std::size_t size) requires std::is_same_v<T, Bytes> {
     if (auto fits = check_size(size); !fits) return std::unexpected(std::move(fits.error()));
     auto chunk = owner_->writer.loan();
@@ -272,12 +272,12 @@ class Publisher {
   std::expected<void, Error> check_size(std::size_t size) const {
     const auto max = owner_->writer.topic()->geometry().max_message_size;
     if (size <= max) return {};
-    return std::unexpected(Error{Errc::limit_exceeded, "topic '" + name() + "': a message of " + std::to_string(size) +
+    return std::unexpected(Error{Errc::too_large, "topic '" + name() + "': a message of " + std::to_string(size) +
                                                            " bytes exceeds its maximum of " + std::to_string(max) + " bytes"});
   }
   std::expected<std::vector<std::uint32_t>, Error> loan_chunks(std::size_t max) {
     if (max == 0)
-      return std::unexpected(Error{Errc::limit_exceeded, "topic '" + name() + "': a batch of 0 slots asked for"});
+      return std::unexpected(Error{Errc::invalid_argument, "topic '" + name() + "': a batch of 0 slots asked for"});
     auto chunks = std::move(owner_->chunk_list);
     chunks.clear();
     chunks.reserve(max);

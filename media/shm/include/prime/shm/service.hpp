@@ -39,7 +39,7 @@ struct Wire {
   // `capacity` bytes.
   static T& place_at(std::byte* at, std::size_t capacity) {
     if (sizeof(T) > capacity)
-      throw Failure{{Errc::limit_exceeded, "a request of " + std::to_string(sizeof(T)) + " bytes exceeds the " +
+      throw Failure{{Errc::too_large, "a request of " + std::to_string(sizeof(T)) + " bytes exceeds the " +
                                                std::to_string(capacity) + " bytes the service's cell has (max_request_size)"}};
     return *::new (at) T;
   }
@@ -50,7 +50,7 @@ struct Wire<Bytes> {
   using value = std::vector<std::byte>;
   static std::size_t write(std::span<const std::byte> v, std::byte* to, std::size_t capacity) {
     if (v.size() > capacity)
-      throw Failure{{Errc::limit_exceeded, "a request of " + std::to_string(v.size()) + " bytes exceeds max_request_size (" +
+      throw Failure{{Errc::too_large, "a request of " + std::to_string(v.size()) + " bytes exceeds max_request_size (" +
                                                std::to_string(capacity) + " bytes)"}};
     if (!v.empty()) std::memcpy(to, v.data(), v.size());
     return v.size();
@@ -75,9 +75,11 @@ using wire_t = std::conditional_t<std::is_same_v<std::remove_cvref_t<T>, std::sp
 //
 // A call that fails throws prime::Failure from operator(), or comes back
 // from call() as an Error: Errc::not_found (no service, or no live server),
-// type_mismatch (other types), limit_exceeded (a limit of ServiceQos, named),
-// timeout, peer_dead (the server died while the call waited), stopped (it
-// stopped), block_failed (the block threw: its message).
+// type_mismatch (other types), too_large (a request or reply over its
+// size), queue_full (queue_depth or calls_per_client), rate_limited
+// (min_interval), too_many_clients (max_clients), timeout, peer_dead (the
+// server died while the call waited), stopped (it stopped), block_failed
+// (the block threw: its message).
 template <Message In, Message Out>
 class ServiceChain {
  public:
@@ -118,7 +120,7 @@ class ServiceChain {
           if constexpr (std::is_same_v<In, Bytes>) {
             const std::size_t n = write(detail::Wire<In>::place_at(to, capacity));
             if (n > capacity)
-              throw Failure{{Errc::limit_exceeded, "a request of " + std::to_string(n) + " bytes exceeds max_request_size (" +
+              throw Failure{{Errc::too_large, "a request of " + std::to_string(n) + " bytes exceeds max_request_size (" +
                                                        std::to_string(capacity) + " bytes)"}};
             return n;
           } else {
@@ -162,7 +164,7 @@ template <Message A, Message B, Message C>
   auto route = first.route();
   route.insert(route.end(), second.route().begin(), second.route().end());
   if (route.size() > detail::kMaxHops)
-    throw Failure{{Errc::limit_exceeded, "a linked call goes through at most " + std::to_string(detail::kMaxHops) +
+    throw Failure{{Errc::invalid_argument, "a linked call goes through at most " + std::to_string(detail::kMaxHops) +
                                              " services, not " + std::to_string(route.size())}};
   return {std::move(route), Graph::sequence(first.graph(), second.graph())};
 }

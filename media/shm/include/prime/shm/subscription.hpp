@@ -30,7 +30,7 @@ namespace prime::shm {
 // subscription gives. It holds at most the topic's max_held samples at once
 // (views alive, copies counting once): past that, try_read() gives nothing
 // (and says so once on core.errors()), and the waiting reads wait for a view
-// to be released, failing with Errc::limit_exceeded at their deadline.
+// to be released, failing with Errc::held_limit at their deadline.
 template <Message T>
 class SubscriptionReader final : public Reader<View<T>>::Impl {
  public:
@@ -165,7 +165,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
   void report_budget() {
     if (budget_reported_) return;
     budget_reported_ = true;
-    report({Errc::limit_exceeded, budget_message() + " (it reads on once one is released)"});
+    report({Errc::held_limit, budget_message() + " (it reads on once one is released)"});
   }
   void report(Error error) {
     if (auto runtime = runtime_.lock()) runtime->report(std::move(error));
@@ -201,7 +201,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       };
       const auto waited = prime::detail::spin_then_sleep(room, sleep, std::chrono::nanoseconds::zero(), deadline, stop);
       if (waited == Waited::stopped) return std::unexpected(stopped());
-      if (waited == Waited::timeout) return std::unexpected(Error{Errc::limit_exceeded, budget_message() + " until the deadline"});
+      if (waited == Waited::timeout) return std::unexpected(Error{Errc::held_limit, budget_message() + " until the deadline"});
     }
     auto sleep = [&](Clock::time_point until) { cursor.sleep_until([&] { return stop.stop_requested(); }, until); };
     const auto waited = prime::detail::spin_then_sleep([&] { return cursor.ready(); }, sleep, spin_, deadline, stop);
@@ -229,7 +229,7 @@ class BatchReader {
 
   // Up to `max` samples, once at least one is published; fails with
   // Errc::timeout at `deadline`, Errc::stopped on a stop request, and
-  // Errc::limit_exceeded when the batches out hold max_held until then.
+  // Errc::held_limit when the batches out hold max_held until then.
   std::expected<Views<T>, Error> read(std::size_t max, Clock::time_point deadline, std::stop_token stop = {}) {
     return reader_->read_views(max, deadline, std::move(stop));
   }

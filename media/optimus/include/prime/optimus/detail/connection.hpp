@@ -304,7 +304,7 @@ class Connection {
   template <class What>
   [[nodiscard]] std::expected<void, Error> fits(std::size_t bytes, What&& what) const {
     if (bytes <= max_bulk_) return {};
-    return std::unexpected(Error{Errc::limit_exceeded, std::string{what()} + " of " + std::to_string(bytes) +
+    return std::unexpected(Error{Errc::too_large, std::string{what()} + " of " + std::to_string(bytes) +
                                                            " bytes is more than redis at " + url_ +
                                                            " takes in one piece (its proto-max-bulk-len, " +
                                                            std::to_string(max_bulk_) + " bytes); nothing was sent"});
@@ -339,7 +339,7 @@ class Connection {
 
   Error io_error() const {
     if (oversized_ != 0)
-      return Error{Errc::limit_exceeded, "redis at " + url_ + ": a command with a string of " + std::to_string(oversized_) +
+      return Error{Errc::too_large, "redis at " + url_ + ": a command with a string of " + std::to_string(oversized_) +
                                              " bytes, more than the server takes in one piece (its proto-max-bulk-len, " +
                                              std::to_string(max_bulk_) + " bytes), was not sent; the connection is dropped"};
     std::string why = ctx_->err ? std::string{ctx_->errstr} : "connection lost";

@@ -257,7 +257,7 @@ class StreamState {
     int attempts = 0;
     for (auto pending = messages; !pending.empty(); pending = again) {
       if (++attempts > kAppendAttempts)
-        return std::unexpected(Error{Errc::limit_exceeded, "source '" + name_ + "': the server refused " +
+        return std::unexpected(Error{Errc::iteration_limit, "source '" + name_ + "': the server refused " +
                                                             std::to_string(pending.size()) + " appends " +
                                                             std::to_string(kAppendAttempts) + " times: its stream keeps changing"});
       auto epoch = stream_epoch(c);

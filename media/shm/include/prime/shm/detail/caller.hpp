@@ -67,10 +67,10 @@ class Binding {
     const auto gap = h.min_interval_ns.load(std::memory_order_relaxed);
     const auto last = slot.last_request.load();
     if (gap > 0 && last != 0 && last <= now && now - last < gap)
-      return limit(service, "a client sends at most one request every " + std::to_string(gap / 1000) +
+      return limit(service, Errc::rate_limited, "a client sends at most one request every " + std::to_string(gap / 1000) +
                                 " us (min_interval)");
     if (const auto depth = h.queue_depth.load(); depth > 0 && service.queued() >= depth)
-      return limit(service, std::to_string(depth) + " requests wait for a worker already (queue_depth)");
+      return limit(service, Errc::queue_full, std::to_string(depth) + " requests wait for a worker already (queue_depth)");
     const auto calls = service.geometry().calls_per_client;
     const auto first = slot_ * calls;
     for (std::size_t k = 0; k < calls; ++k) {
@@ -82,7 +82,7 @@ class Binding {
         return first + k;
       }
     }
-    return limit(service, "this client has " + std::to_string(calls) +
+    return limit(service, Errc::queue_full, "this client has " + std::to_string(calls) +
                               " calls in flight already (calls_per_client)");
   }
 
@@ -143,7 +143,7 @@ class Binding {
       }
       if (service.reclaim_dead_clients() == 0) break;
     }
-    return std::unexpected(Error{Errc::limit_exceeded, "service '" + name_ + "' has its maximum of " +
+    return std::unexpected(Error{Errc::too_many_clients, "service '" + name_ + "' has its maximum of " +
                                                            std::to_string(service.geometry().max_clients) + " clients (max_clients)"});
   }
 
@@ -172,8 +172,8 @@ class Binding {
   static std::unexpected<Error> not_found(std::string message) {
     return std::unexpected(Error{Errc::not_found, std::move(message)});
   }
-  static std::unexpected<Error> limit(const Service& service, const std::string& what) {
-    return std::unexpected(Error{Errc::limit_exceeded, "service '" + service.name() + "': " + what});
+  static std::unexpected<Error> limit(const Service& service, Errc code, const std::string& what) {
+    return std::unexpected(Error{code, "service '" + service.name() + "': " + what});
   }
 
   std::shared_ptr<Registry> registry_;

@@ -118,7 +118,7 @@ class Cursor {
       if (slot_ == kNone && topic_->reclaim_dead_subscribers() == 0) break;
     }
     if (slot_ == kNone)
-      throw Failure{{Errc::limit_exceeded, observer ? "topic '" + topic_->name() + "' is observed already"
+      throw Failure{{Errc::too_many_subscribers, observer ? "topic '" + topic_->name() + "' is observed already"
                                                     : "topic '" + topic_->name() + "' has its maximum of " +
                                                           std::to_string(g.max_subscribers) + " subscribers"}};
     bit_ = 1ull << slot_;

@@ -76,15 +76,15 @@ class Registry : public std::enable_shared_from_this<Registry> {
   // works on a running system), nothing is touched and joining fails.
   static std::shared_ptr<Registry> join(const std::string& domain, const Access& access, const std::string& name,
                                         bool only_if_alive = false) {
-    if (domain.empty()) throw Failure{{Errc::limit_exceeded, "shm: a domain needs a name"}};
+    if (domain.empty()) throw Failure{{Errc::invalid_argument, "shm: a domain needs a name"}};
     // Its registry's name must read back as the domain (tools find domains
     // by it): one shortened with a hash could not.
     if (const auto name = segment_name(domain, "registry", ""); name.find('#') != std::string::npos)
-      throw Failure{{Errc::limit_exceeded, "shm domain '" + domain.substr(0, 40) + "...': too long (" +
+      throw Failure{{Errc::invalid_argument, "shm domain '" + domain.substr(0, 40) + "...': too long (" +
                                                std::to_string(domain.size()) +
                                                " characters; escaped, its registry's name must stay within 200)"}};
     if ((access.permissions & ~0666u) != 0)
-      throw Failure{{Errc::limit_exceeded, "shm domain '" + domain + "': permissions are read and write bits (at most 0666)"}};
+      throw Failure{{Errc::invalid_argument, "shm domain '" + domain + "': permissions are read and write bits (at most 0666)"}};
     while (true) {
       auto registry = std::shared_ptr<Registry>{new Registry{domain, access}};
       if (registry->enter(name, only_if_alive)) return registry;
@@ -160,14 +160,14 @@ class Registry : public std::enable_shared_from_this<Registry> {
   // index, which stays its own while the domain lives.
   std::size_t add(EndpointKind kind, const std::string& name) {
     const auto what = std::string{kind_name(kind)} + " '" + name + "'";
-    if (name.empty()) throw Failure{{Errc::limit_exceeded, "shm: a " + std::string{kind_name(kind)} + " needs a name"}};
+    if (name.empty()) throw Failure{{Errc::invalid_argument, "shm: a " + std::string{kind_name(kind)} + " needs a name"}};
     if (name.size() >= kNameCapacity)
-      throw Failure{{Errc::limit_exceeded, what + ": names are at most " + std::to_string(kNameCapacity - 1) + " characters"}};
+      throw Failure{{Errc::invalid_argument, what + ": names are at most " + std::to_string(kNameCapacity - 1) + " characters"}};
     // The table keeps names as text ending in a NUL: one holding a NUL or
     // another control character would never be found again, and take a
     // new entry on every open.
     if (std::any_of(name.begin(), name.end(), [](char c) { return static_cast<unsigned char>(c) < 0x20 || c == 0x7f; }))
-      throw Failure{{Errc::limit_exceeded, std::string{kind_name(kind)} + " names hold no control character (a NUL, a newline...)"}};
+      throw Failure{{Errc::invalid_argument, std::string{kind_name(kind)} + " names hold no control character (a NUL, a newline...)"}};
     Locked lock{*this};
     auto& r = layout();
     std::size_t free = kMaxEndpoints;
@@ -177,7 +177,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
       if (!e.used && free == kMaxEndpoints) free = i;
     }
     if (free == kMaxEndpoints)
-      throw Failure{{Errc::limit_exceeded, "shm domain '" + domain_ + "' has its maximum of " +
+      throw Failure{{Errc::domain_full, "shm domain '" + domain_ + "' has its maximum of " +
                                                std::to_string(kMaxEndpoints) + " topics and services"}};
     auto& e = r.endpoints[free];
     e.kind = kind;
@@ -315,7 +315,7 @@ class Registry : public std::enable_shared_from_this<Registry> {
       p.id.store(me_);
       return true;
     }
-    throw Failure{{Errc::limit_exceeded, "shm domain '" + domain_ + "' has its maximum of " +
+    throw Failure{{Errc::domain_full, "shm domain '" + domain_ + "' has its maximum of " +
                                              std::to_string(kMaxParticipants) + " participants"}};
   }
 

@@ -90,7 +90,7 @@ class Writer {
     const auto& g = topic_->geometry();
     const bool block = topic_->overflow() == Overflow::block;
     if (block && out_ >= g.capacity)
-      return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() + "': all " +
+      return std::unexpected(Error{Errc::queue_full, "topic '" + topic_->name() + "': all " +
                                                              std::to_string(g.capacity) +
                                                              " places of its ring are loaned out; publish or drop a "
                                                              "loan before taking another"});
@@ -106,12 +106,12 @@ class Writer {
     // subscriber's max_held take. With none out, running short means a
     // slot's owner broke that rule (a foreign or corrupted participant).
     if (out_ > 0)
-      return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() +
+      return std::unexpected(Error{Errc::queue_full, "topic '" + topic_->name() +
                                                              "': no chunk is free for another loan: this publisher has " +
                                                              std::to_string(out_) +
                                                              " loaned out and the ring and subscribers hold the rest; "
                                                              "publish or drop a loan before taking another"});
-    return std::unexpected(Error{Errc::limit_exceeded, "topic '" + topic_->name() + "': all " +
+    return std::unexpected(Error{Errc::queue_full, "topic '" + topic_->name() + "': all " +
                                                            std::to_string(g.chunk_count()) +
                                                            " chunks are in use; a subscriber holds more than max_held (" +
                                                            std::to_string(g.max_held) + ")"});
