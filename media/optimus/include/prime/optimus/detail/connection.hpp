@@ -211,9 +211,8 @@ class Connection {
   }
 
   // Queues a command; nothing is sent until a reply is asked for. Written
-  // out here (an array of bulk strings): hiredis's own formatting of an
-  // argument vector (sdscatfmt) took about 40 µs of the 92 a client spent
-  // on a batch of 64 stream appends.
+  // out here (an array of bulk strings), not by hiredis's own formatting
+  // (docs/performance.md: "Commands formatted by Optimus").
   // A command with a string longer than the server takes is not sent: the
   // server would drop the connection. It breaks this one instead, and the
   // reply says why (callers check a message with fits() before that).

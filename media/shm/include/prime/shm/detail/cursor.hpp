@@ -517,8 +517,8 @@ class Cursor {
   // When the next sample is out already (a reader behind its publisher),
   // asks for its chunk's lines now, so they travel while this one is read:
   // a chunk a page or more from the last is not one the hardware
-  // prefetcher finds (measured: one at a time at 1 MiB 1.6x faster, the
-  // same rate as at 64 bytes). Relaxed: it only prefetches; the take loads
+  // prefetcher finds (docs/performance.md: "Prefetch the next sample's
+  // chunk"). Relaxed: it only prefetches; the take loads
   // the entry again.
   void prefetch_next() const noexcept {
     const auto entry = topic_->ring(next_).load(std::memory_order_relaxed);

@@ -31,14 +31,9 @@ namespace prime::shm::detail {
 // still names it. A sample's size and stamp lie beside its ring entry
 // (SampleInfo), not in its chunk. So a publish writes the payload, the
 // info and the ring entry, and (below a page: see Writer::describe)
-// nothing in the chunk's header, which subscribers holding it write.
-// Measured on an AMD EPYC against layout 9 (a sequence, size and stamp in
-// each chunk's header, written by each publish, and a bit each for the
-// ring and the loan), 64-byte messages in paired runs: batches of views
-// across processes about 1.2x as fast, the publisher alone 1.16x;
-// read_some batches within noise at 64 bytes and 1 MiB (0.9-1.0x); a
-// publish to 4 read_some readers up to 1.14x the time, as they now read
-// the infos and the ring lines the publisher writes, not its headers.
+// nothing in the chunk's header, which subscribers holding it write
+// (docs/performance.md: "Layout 12: a publish writes no header per
+// sample", against layout 9's sequence, size and stamp in each header).
 
 static_assert(std::atomic<std::uint64_t>::is_always_lock_free, "shared memory needs lock-free 64-bit atomics");
 static_assert(std::atomic<std::uint32_t>::is_always_lock_free, "shared memory needs lock-free 32-bit atomics");
@@ -68,20 +63,15 @@ inline constexpr std::uint64_t kNoCursor = ~0ull;      // a subscriber slot not 
 inline constexpr std::size_t kPayloadAlignment = 64;
 // The infos and the chunks each start a page: a reader walking the ring or
 // the infos does not have the hardware prefetcher pull in the lines after
-// them, which the publisher writes (measured: batches of views at 64 bytes
-// 1.2x faster than with the parts packed to the line).
+// them, which the publisher writes (docs/performance.md: "Infos and chunks
+// each start a page").
 inline constexpr std::size_t kPageAlignment = 4096;
 // A chunk's header has a 128-byte block to itself, and its payload starts
 // at the next: a reader of the payload alone (a batch of views) then does
 // not have the adjacent-line prefetcher, which fetches lines in 128-byte
-// pairs, pull in the header others write. Measured on an AMD EPYC with
-// layout 9, when each publish wrote the header, 64-byte messages: batches
-// of views 1.1x, read_some batches 1.4x faster than with header and
-// payload sharing a block; latency and views at 1 MiB unchanged; read_some
-// at 1 MiB about 0.9x, a held sample's header and payload being two
-// fetches, not one pair. Not measured again since a publish stopped
-// writing it. Chunks are whole blocks, so no payload shares one with the
-// next chunk's header either.
+// pairs, pull in the header others write (docs/performance.md: "A chunk's
+// header gets a 128-byte block of its own"). Chunks are whole blocks, so
+// no payload shares one with the next chunk's header either.
 inline constexpr std::size_t kChunkAlignment = 2 * kPayloadAlignment;
 inline constexpr std::size_t kPayloadOffset = kChunkAlignment;  // from a chunk's start
 inline constexpr std::uint64_t kPublisherSleeper = 1;  // the space doorbell's one sleeper

@@ -234,11 +234,10 @@ class Writer {
   // publisher's alone (a bit a subscriber sets meanwhile is one it takes
   // back at once: the ring no longer names the chunk for the sample it
   // looked for). A subscriber that holds it then finds the line in this
-  // publisher's cache: measured at 1 MiB, read_some batches 1.2-1.6x
-  // faster (two series of paired runs) than with the line last written
-  // when the subscriber let go of the chunk's previous sample. Below a
-  // page the header is left alone: batches of views at 64 bytes about 1.2x
-  // faster than when each publish wrote it.
+  // publisher's cache, not as the subscriber that let go of the chunk's
+  // previous sample left it. Below a page the header is left alone
+  // (docs/performance.md: "Layout 12", "Chunks of a page or more still get
+  // their header written").
   static void describe(const Places& places, std::uint32_t chunk, std::uint64_t seq, std::size_t size,
                        Clock::time_point stamp) noexcept {
     auto& info = places.info(seq);
@@ -349,7 +348,8 @@ class Writer {
   // waits for that cursor, or held the batch's chunks for the subscriber
   // when it stopped waiting.
   // A light publisher, one at a time, evicts by read-modify-writes per
-  // kLeavingMax samples: measured faster than a fence for them.
+  // kLeavingMax samples, cheaper than a fence for them (docs/performance.md:
+  // "Evictions ride on the head's fence").
   void evict(std::uint32_t old, bool fenced) noexcept {
     auto& dropped = topic_->chunk(old);
     if (!spare_.full()) {
@@ -365,11 +365,9 @@ class Writer {
 
   // evict(chunk, true) for each of the first `n` chunks of batch_leaving_:
   // their holders all read first (relaxed), then one acquire fence for the
-  // reads, then each chunk kept as a spare or let go. Measured at 64 bytes,
-  // batches of 32, paired rounds against an acquire load per chunk: the
-  // publisher alone 1.05-1.16x, batches of views across processes
-  // 1.00-1.16x, median 1.13x (rounds where the floor ran fast); acquire
-  // loads in a loop of their own gained nothing (the publisher alone).
+  // reads, then each chunk kept as a spare or let go, not an acquire load
+  // per chunk (docs/performance.md: "Read a batch's evicted holders at
+  // once").
   // ThreadSanitizer does not see fences (GCC says so: -Wtsan), so under it
   // the loads acquire themselves: the same order, one it can check.
   void evict_fenced(const Places& places, std::size_t n) noexcept {
@@ -585,9 +583,8 @@ class Writer {
   // ring holds and kAhead: a batch as large as the ring hands every chunk
   // it pushes out to the next loans without a read-modify-write (once let
   // go, a chunk is claimed again by one). No one but this publisher takes
-  // free chunks, so the ones it keeps are missed by no one. Measured at 64
-  // bytes, the publisher alone in batches of 128: 125 M/s against 73 with
-  // room for 64 spares (paired rounds); batches of 32 unchanged.
+  // free chunks, so the ones it keeps are missed by no one
+  // (docs/performance.md: "Keep every chunk a batch pushes out of the ring").
   Fifo spare_;
   Fifo leaving_;  // out of the ring, not evicted yet (see leave)
   // A batch's (publish_some), and those leaving from before: room for a
