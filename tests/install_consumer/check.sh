@@ -59,6 +59,28 @@ not_found shm_without_boost "Boost" -DPRIME_COMPONENTS=shm "$hide_boost"
 not_found optimus_without_hiredis "hiredis" -DPRIME_COMPONENTS=optimus "$hide_hiredis"
 echo "find_package(prime) consumers built and ran"
 
+# Prime itself configures without Boost, hiredis or CLI11 when the media and
+# the tool that need them are left out; left in, the message names the
+# Debian package and the option.
+without="-DPRIME_WITH_SHM=OFF -DPRIME_WITH_OPTIMUS=OFF -DPRIME_WITH_TOOLS=OFF"
+hide_cli11=-DCMAKE_DISABLE_FIND_PACKAGE_CLI11=ON
+# shellcheck disable=SC2086
+cmake -S "$source/../.." -B "$work/core_only" $without "$hide_boost" "$hide_hiredis" "$hide_cli11" \
+  >"$work/core_only.log" 2>&1 || fail "prime without Shm, Optimus and the tool did not configure" "$work/core_only.log"
+cmake --install "$work/core_only" --prefix "$work/core_prefix" >>"$work/core_only.log" 2>&1 ||
+  fail "prime without Shm, Optimus and the tool did not install" "$work/core_only.log"
+echo "core only: configured and installed without Boost, hiredis or CLI11"
+if cmake -S "$source/../.." -B "$work/no_boost" "$hide_boost" >"$work/no_boost.log" 2>&1; then
+  fail "prime configured with Shm on and Boost hidden" "$work/no_boost.log"
+fi
+grep -q "libboost-dev" "$work/no_boost.log" && grep -q "PRIME_WITH_SHM=OFF" "$work/no_boost.log" ||
+  fail "the message does not name libboost-dev and PRIME_WITH_SHM=OFF" "$work/no_boost.log"
+echo "Shm on, Boost hidden: refused, naming libboost-dev and PRIME_WITH_SHM=OFF"
+# A consumer of that install finds the core, and not the media it lacks.
+configure from_core_only -DCMAKE_PREFIX_PATH="$work/core_prefix" || fail "from_core_only: configuring" "$work/from_core_only.log"
+echo "from_core_only: the core found, and neither medium"
+not_found shm_from_core_only "built without it" -DCMAKE_PREFIX_PATH="$work/core_prefix" -DPRIME_COMPONENTS=shm
+
 # The installed prime finds its benchmarks where they are installed, and
 # names that place when they are not there (a build without the benchmarks).
 bench=$work/prefix/libexec/prime/bench
