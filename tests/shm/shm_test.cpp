@@ -399,7 +399,7 @@ TEST_F(ShmTest, ADamagedTopicIsRefusedByNameAndPassedOverByTools) {
 // so is one that claims this version but whose chunks lie elsewhere.
 TEST_F(ShmTest, ATopicOfAnotherLayoutIsRefusedByVersion) {
   auto publisher = core.publisher<int>("old");
-  const auto layout = shm::detail::kLayoutVersion;
+  const auto layout = shm::detail::kTopicLayout;
   MappedTopic{core.domain(), "old"}.header().layout = layout - 1;
   shm::Core other{core.domain()};
   EXPECT_TRUE(fails_with([&] { (void)other.subscribe<int>("old"); }, Errc::type_mismatch,

@@ -8,6 +8,7 @@
 
 #include "prime/common/fingerprint.hpp"
 #include "prime/shm/detail/doorbell.hpp"
+#include "prime/shm/detail/versions.hpp"
 
 namespace prime::shm::detail {
 
@@ -49,8 +50,6 @@ using ParticipantId = std::uint64_t;
 // never reach it.
 inline constexpr ParticipantId kReclaimingBit = 1ull << 63;
 
-inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;  // "PRIMESM4"
-inline constexpr std::uint32_t kLayoutVersion = 12;
 // Room for a message type's description (prime::schema_of), for tools.
 inline constexpr std::size_t kSchemaCapacity = 2048;
 // Subscriber slots a topic may offer; one more is kept for tools that observe.
@@ -162,7 +161,7 @@ static_assert(sizeof(SubscriberSlot) == 64, "each subscriber's cursor on a line 
 
 struct TopicHeader {
   std::atomic<std::uint64_t> magic{0};  // kTopicMagic once the creator has set everything below
-  std::uint32_t layout = kLayoutVersion;
+  std::uint32_t layout = kTopicLayout;
   std::uint32_t overflow = 0;
   Fingerprint type{};
   std::uint64_t capacity = 0;

@@ -23,7 +23,6 @@
 
 namespace prime::shm::detail {
 
-inline constexpr std::uint64_t kRegistryMagic = 0x5052494d45524733ull;  // "PRIMERG3"
 inline constexpr std::size_t kMaxParticipants = 128;
 inline constexpr std::size_t kMaxEndpoints = 512;  // topics and services
 

@@ -23,8 +23,6 @@ namespace prime::shm::detail {
 // Each cell's status word carries a ticket that changes whenever the cell
 // is freed, so an answer meant for a call that gave up never reaches a later one.
 
-inline constexpr std::uint64_t kServiceMagic = 0x5052494d45535633ull;  // "PRIMESV3"
-inline constexpr std::uint32_t kServiceLayout = 5;
 inline constexpr std::size_t kMaxCells = 256;
 inline constexpr std::size_t kPendingWords = kMaxCells / 64;
 inline constexpr std::size_t kMaxServiceClients = 128;

@@ -90,7 +90,7 @@ class Topic {
     auto segment = Segment::open_existing(segment_name(registry->domain(), "topic", name), registry->access());
     if (!segment || segment->size() < sizeof(TopicHeader)) return nullptr;
     const auto* header = std::launder(reinterpret_cast<const TopicHeader*>(segment->data()));
-    if (header->magic.load(std::memory_order_acquire) != kTopicMagic || header->layout != kLayoutVersion) return nullptr;
+    if (header->magic.load(std::memory_order_acquire) != kTopicMagic || header->layout != kTopicLayout) return nullptr;
     return std::shared_ptr<Topic>{new Topic{std::move(registry), name, std::move(*segment)}};
   }
 
@@ -184,10 +184,10 @@ class Topic {
     const auto* header = std::launder(reinterpret_cast<const TopicHeader*>(data));
     const auto magic = header->magic.load(std::memory_order_acquire);
     if (magic == 0) return false;  // new, or its creator died setting it up
-    if (magic != kTopicMagic || header->layout != kLayoutVersion)
+    if (magic != kTopicMagic || header->layout != kTopicLayout)
       throw Failure{{Errc::type_mismatch, "topic '" + name + "': made by another version of Prime (layout " +
                                               std::to_string(header->layout) + ", this one reads " +
-                                              std::to_string(kLayoutVersion) + ")"}};
+                                              std::to_string(kTopicLayout) + ")"}};
     return true;  // its geometry is checked when it is mapped (checked_geometry)
   }
   // The geometry `header` records, read once and checked against the segment.
