@@ -160,6 +160,10 @@ struct alignas(64) SubscriberSlot {
 static_assert(sizeof(SubscriberSlot) == 64, "each subscriber's cursor on a line of its own");
 
 struct TopicHeader {
+  static constexpr const char* kKind = "topic";  // in its segment's name (and TypedSegment's errors)
+  static constexpr std::uint64_t kMagic = kTopicMagic;
+  static constexpr std::uint32_t kLayout = kTopicLayout;
+
   std::atomic<std::uint64_t> magic{0};  // kTopicMagic once the creator has set everything below
   std::uint32_t layout = kTopicLayout;
   std::uint32_t overflow = 0;

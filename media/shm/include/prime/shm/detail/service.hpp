@@ -20,6 +20,7 @@
 #include "prime/shm/detail/registry.hpp"
 #include "prime/shm/detail/segment.hpp"
 #include "prime/shm/detail/service_layout.hpp"
+#include "prime/shm/detail/typed_segment.hpp"
 #include "prime/shm/message.hpp"
 #include "prime/shm/qos.hpp"
 
@@ -51,35 +52,28 @@ class Service {
   static std::shared_ptr<Service> open_to_serve(std::shared_ptr<Registry> registry, const std::string& name,
                                                 const ServiceSpec& spec) {
     const auto index = registry->add(EndpointKind::service, name);
-    const auto segment_name = detail::segment_name(registry->domain(), "service", name);
-    const auto what = "service '" + name + "'";
+    const auto what = Mapped::what(name);
     const ServiceGeometry geometry{spec.qos.max_request_size, spec.qos.max_reply_size, spec.qos.max_clients,
                                    spec.qos.calls_per_client};
     while (true) {
-      auto segment = Segment::open(
-          segment_name, registry->access(), geometry.bytes(), what,
-          [&](std::byte* data, std::size_t size) { return is_set_up(name, data, size); },
-          [&](std::byte* data, std::size_t) { set_up(data, spec, geometry); });
-      auto service = std::shared_ptr<Service>{new Service{registry, name, index, std::move(segment)}};
+      auto mapped = Mapped::open(*registry, name, geometry.bytes(), [&](std::byte* data) { set_up(data, spec, geometry); });
+      auto service = std::shared_ptr<Service>{new Service{registry, name, index, std::move(mapped)}};
       auto& h = service->header();
       if (registry->alive(h.server.load()))
         throw Failure{{Errc::in_use, what + " is served already by " + registry->describe(h.server.load())}};
       if (h.request_type == spec.request_type && h.reply_type == spec.reply_type && same_limits(service->geometry(), spec.qos))
         return service;
-      service->segment_.remove_name(what);  // an earlier server's, for other types or limits: start afresh
+      service->mapped_.segment().remove_name(what);  // an earlier server's, for other types or limits: start afresh
     }
   }
 
   // For a client: the service `name` as it is, or null when there is none.
   // Throws Failure (Errc::damaged) when its header is damaged.
   static std::shared_ptr<Service> open_existing(std::shared_ptr<Registry> registry, const std::string& name) {
-    auto segment = Segment::open_existing(segment_name(registry->domain(), "service", name), registry->access());
-    if (!segment || segment->size() < sizeof(ServiceHeader)) return nullptr;
-    const auto* h = std::launder(reinterpret_cast<const ServiceHeader*>(segment->data()));
-    if (h->magic.load(std::memory_order_acquire) != kServiceMagic || h->layout != kServiceLayout) return nullptr;
-    (void)checked_geometry(name, *h, segment->size());  // before it takes a registry entry
+    auto mapped = Mapped::open_existing(*registry, name);  // its geometry checked before it takes a registry entry
+    if (!mapped) return nullptr;
     const auto index = registry->add(EndpointKind::service, name);
-    return std::shared_ptr<Service>{new Service{std::move(registry), name, index, std::move(*segment)}};
+    return std::shared_ptr<Service>{new Service{std::move(registry), name, index, std::move(*mapped)}};
   }
 
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
@@ -89,41 +83,41 @@ class Service {
   // Its shared state. What it fixed at creation is read through
   // geometry(), never here: see ServiceGeometry.
   [[nodiscard]] ServiceHeader& header() const noexcept { return *header_; }
-  [[nodiscard]] const ServiceGeometry& geometry() const noexcept { return geometry_; }
+  [[nodiscard]] const ServiceGeometry& geometry() const noexcept { return mapped_.geometry(); }
   // Whether `i` names one of its cells: an index read from shared memory
   // (a pending bit, a linked call's hop) is checked before it is used.
-  [[nodiscard]] bool has_cell(std::size_t i) const noexcept { return i < geometry_.cell_count(); }
+  [[nodiscard]] bool has_cell(std::size_t i) const noexcept { return i < geometry().cell_count(); }
   [[nodiscard]] CellHeader& cell(std::size_t i) const noexcept {
     return *std::launder(reinterpret_cast<CellHeader*>(cells_ + i * stride_));
   }
   [[nodiscard]] CellTail& tail(std::size_t i) const noexcept {
-    return *std::launder(reinterpret_cast<CellTail*>(cells_ + i * stride_ + geometry_.tail_offset()));
+    return *std::launder(reinterpret_cast<CellTail*>(cells_ + i * stride_ + geometry().tail_offset()));
   }
   [[nodiscard]] std::byte* request(std::size_t i) const noexcept {
-    return cells_ + i * stride_ + geometry_.request_offset();
+    return cells_ + i * stride_ + geometry().request_offset();
   }
-  [[nodiscard]] std::byte* reply(std::size_t i) const noexcept { return cells_ + i * stride_ + geometry_.reply_offset(); }
+  [[nodiscard]] std::byte* reply(std::size_t i) const noexcept { return cells_ + i * stride_ + geometry().reply_offset(); }
   // A request's or reply's size as shared memory records it, within its room.
   [[nodiscard]] std::size_t request_size(const CellHeader& c) const noexcept {
-    return static_cast<std::size_t>(std::min<std::uint64_t>(c.request_size, geometry_.max_request_size));
+    return static_cast<std::size_t>(std::min<std::uint64_t>(c.request_size, geometry().max_request_size));
   }
   [[nodiscard]] std::size_t reply_size(const CellHeader& c) const noexcept {
-    return static_cast<std::size_t>(std::min<std::uint64_t>(c.reply_size, geometry_.max_reply_size));
+    return static_cast<std::size_t>(std::min<std::uint64_t>(c.reply_size, geometry().max_reply_size));
   }
   // The error a failed call's cell carries.
   [[nodiscard]] std::string error(std::size_t i) const { return read_text(tail(i).error); }
   // Whether the name still leads to this segment (a server that came back
   // for other types made a new one).
-  [[nodiscard]] bool current() const { return segment_.linked(); }
+  [[nodiscard]] bool current() const { return mapped_.segment().linked(); }
 
   [[nodiscard]] ServiceQos qos() const noexcept {
     const auto& h = *header_;
     return {.workers = h.workers.load(),
             .timeout = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::nanoseconds{h.timeout_ns.load()}),
-            .max_request_size = geometry_.max_request_size,
-            .max_reply_size = geometry_.max_reply_size,
-            .max_clients = geometry_.max_clients,
-            .calls_per_client = geometry_.calls_per_client,
+            .max_request_size = geometry().max_request_size,
+            .max_reply_size = geometry().max_reply_size,
+            .max_clients = geometry().max_clients,
+            .calls_per_client = geometry().calls_per_client,
             .min_interval = std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::nanoseconds{h.min_interval_ns.load()}),
             .queue_depth = h.queue_depth.load()};
   }
@@ -152,10 +146,10 @@ class Service {
   // What a live worker holds is abandoned instead: that worker frees it.
   std::size_t reclaim_dead_clients() const {
     std::size_t n = 0;
-    for (std::size_t c = 0; c < geometry_.max_clients; ++c) {
+    for (std::size_t c = 0; c < geometry().max_clients; ++c) {
       auto& slot = header_->clients[c];
       if (!registry_->take_to_clear(slot.owner)) continue;
-      for (std::size_t k = 0; k < geometry_.calls_per_client; ++k) release(c * geometry_.calls_per_client + k);
+      for (std::size_t k = 0; k < geometry().calls_per_client; ++k) release(c * geometry().calls_per_client + k);
       slot.last_request.store(0);
       slot.owner.store(0);
       ++n;
@@ -188,36 +182,20 @@ class Service {
   }
 
  private:
-  Service(std::shared_ptr<Registry> registry, std::string name, std::size_t index, Segment segment)
+  using Mapped = TypedSegment<ServiceHeader, ServiceGeometry>;
+
+  Service(std::shared_ptr<Registry> registry, std::string name, std::size_t index, Mapped mapped)
       : registry_{std::move(registry)},
         name_{std::move(name)},
         index_{static_cast<std::uint32_t>(index)},
-        segment_{std::move(segment)},
-        header_{std::launder(reinterpret_cast<ServiceHeader*>(segment_.data()))},
-        geometry_{checked_geometry(name_, *header_, segment_.size())},
-        cells_{segment_.data() + geometry_.cells_offset()},
-        stride_{geometry_.cell_stride()} {}
+        mapped_{std::move(mapped)},
+        header_{&mapped_.header()},
+        cells_{mapped_.data() + geometry().cells_offset()},
+        stride_{geometry().cell_stride()} {}
 
   static bool same_limits(const ServiceGeometry& g, const ServiceQos& q) {
     return g.max_request_size == q.max_request_size && g.max_reply_size == q.max_reply_size &&
            g.max_clients == q.max_clients && g.calls_per_client == q.calls_per_client;
-  }
-
-  static bool is_set_up(const std::string& name, std::byte* data, std::size_t size) {
-    if (size < sizeof(ServiceHeader)) return false;
-    const auto* h = std::launder(reinterpret_cast<const ServiceHeader*>(data));
-    const auto magic = h->magic.load(std::memory_order_acquire);
-    if (magic == 0) return false;
-    if (magic != kServiceMagic || h->layout != kServiceLayout)
-      throw Failure{{Errc::type_mismatch, "service '" + name + "': made by another version of Prime"}};
-    return true;  // its geometry is checked when it is mapped (checked_geometry)
-  }
-  // The geometry `header` records, read once and checked against the segment.
-  static ServiceGeometry checked_geometry(const std::string& name, const ServiceHeader& header, std::size_t size) {
-    const auto geometry = ServiceGeometry::of(header);
-    if (const auto what = damage(header, geometry, size); !what.empty())
-      throw Failure{{Errc::damaged, "service '" + name + "': its shared memory is damaged (" + what + ")"}};
-    return geometry;
   }
 
   static void set_up(std::byte* data, const ServiceSpec& spec, const ServiceGeometry& geometry) {
@@ -251,9 +229,8 @@ class Service {
   std::shared_ptr<Registry> registry_;
   std::string name_;
   std::uint32_t index_;
-  Segment segment_;
-  ServiceHeader* header_;
-  ServiceGeometry geometry_;  // read once from the header, and checked
+  Mapped mapped_;
+  ServiceHeader* header_;  // mapped_'s, at hand
   std::byte* cells_;
   std::size_t stride_;  // from one cell to the next
 };

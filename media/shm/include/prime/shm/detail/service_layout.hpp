@@ -85,7 +85,11 @@ struct alignas(64) ClientSlot {
 static_assert(sizeof(ClientSlot) == 64);
 
 struct ServiceHeader {
-  std::atomic<std::uint64_t> magic{0};
+  static constexpr const char* kKind = "service";  // in its segment's name (and TypedSegment's errors)
+  static constexpr std::uint64_t kMagic = kServiceMagic;
+  static constexpr std::uint32_t kLayout = kServiceLayout;
+
+  std::atomic<std::uint64_t> magic{0};  // kServiceMagic once the creator has set everything below
   std::uint32_t layout = kServiceLayout;
   std::atomic<std::uint32_t> workers{0};  // the current server's
   // Drawn at random when the segment is made: a segment made anew under the

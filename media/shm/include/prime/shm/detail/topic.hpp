@@ -15,6 +15,7 @@
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/registry.hpp"
 #include "prime/shm/detail/segment.hpp"
+#include "prime/shm/detail/typed_segment.hpp"
 #include "prime/shm/qos.hpp"
 
 namespace prime::shm::detail {
@@ -71,15 +72,13 @@ class Topic {
                                      const Fingerprint& type, const TopicQos& qos, const std::string& schema = {},
                                      std::uint64_t first_sequence = 0) {
     const TopicGeometry geometry{qos.capacity, qos.max_message_size, qos.max_subscribers, qos.max_held};
-    const auto what = "topic '" + name + "'";
     registry->add(EndpointKind::topic, name);
-    auto segment = Segment::open(
-        segment_name(registry->domain(), "topic", name), registry->access(), geometry.bytes(), what,
-        [&](std::byte* data, std::size_t size) { return is_set_up(name, data, size); },
-        [&](std::byte* data, std::size_t) { set_up(data, type, qos, geometry, schema, first_sequence); });
-    auto topic = std::shared_ptr<Topic>{new Topic{std::move(registry), name, std::move(segment)}};
+    auto mapped = Mapped::open(*registry, name, geometry.bytes(),
+                               [&](std::byte* data) { set_up(data, type, qos, geometry, schema, first_sequence); });
+    auto topic = std::shared_ptr<Topic>{new Topic{std::move(registry), name, std::move(mapped)}};
     if (!(topic->header().type == type))
-      throw Failure{{Errc::type_mismatch, what + " carries " + topic->header().type.describe() + ", not " + type.describe()}};
+      throw Failure{{Errc::type_mismatch, Mapped::what(name) + " carries " + topic->header().type.describe() + ", not " +
+                                              type.describe()}};
     return topic;
   }
 
@@ -87,20 +86,18 @@ class Topic {
   // exist (or is not set up yet): for inspection. Throws Failure
   // (Errc::damaged) when its header is damaged.
   static std::shared_ptr<Topic> inspect(std::shared_ptr<Registry> registry, const std::string& name) {
-    auto segment = Segment::open_existing(segment_name(registry->domain(), "topic", name), registry->access());
-    if (!segment || segment->size() < sizeof(TopicHeader)) return nullptr;
-    const auto* header = std::launder(reinterpret_cast<const TopicHeader*>(segment->data()));
-    if (header->magic.load(std::memory_order_acquire) != kTopicMagic || header->layout != kTopicLayout) return nullptr;
-    return std::shared_ptr<Topic>{new Topic{std::move(registry), name, std::move(*segment)}};
+    auto mapped = Mapped::open_existing(*registry, name);
+    if (!mapped) return nullptr;
+    return std::shared_ptr<Topic>{new Topic{std::move(registry), name, std::move(*mapped)}};
   }
 
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
-  [[nodiscard]] const Segment& segment() const noexcept { return segment_; }
+  [[nodiscard]] const Segment& segment() const noexcept { return mapped_.segment(); }
   [[nodiscard]] Registry& registry() const noexcept { return *registry_; }
   // Its shared state. What it fixed at creation is read through geometry()
   // and overflow(), never here: see TopicGeometry.
   [[nodiscard]] TopicHeader& header() const noexcept { return *header_; }
-  [[nodiscard]] const TopicGeometry& geometry() const noexcept { return geometry_; }
+  [[nodiscard]] const TopicGeometry& geometry() const noexcept { return mapped_.geometry(); }
   [[nodiscard]] Overflow overflow() const noexcept { return overflow_; }
   [[nodiscard]] const Places& places() const noexcept { return places_; }
   [[nodiscard]] std::atomic<std::uint64_t>& ring(std::uint64_t seq) const noexcept { return places_.ring(seq); }
@@ -110,14 +107,14 @@ class Topic {
   [[nodiscard]] std::byte* payload(std::uint32_t i) const noexcept { return places_.payload(i); }
   [[nodiscard]] TopicQos qos() const noexcept {
     const auto& h = *header_;
-    return {.capacity = geometry_.capacity,
-            .max_message_size = geometry_.max_message_size,
+    return {.capacity = geometry().capacity,
+            .max_message_size = geometry().max_message_size,
             .overflow = overflow_,
             .block_timeout = std::chrono::duration_cast<std::chrono::milliseconds>(
                 std::chrono::nanoseconds{h.block_timeout_ns.load(std::memory_order_relaxed)}),
             .publish_fence = h.light_publisher.load(std::memory_order_relaxed) != 0 ? PublishFence::light : PublishFence::full,
-            .max_subscribers = geometry_.max_subscribers,
-            .max_held = geometry_.max_held};
+            .max_subscribers = geometry().max_subscribers,
+            .max_held = geometry().max_held};
   }
 
   // Clears what the dead owner of subscriber slot `i` held. Safe to race:
@@ -161,42 +158,23 @@ class Topic {
   }
 
  private:
-  // Throws Failure (Errc::damaged) when the header is damaged.
-  Topic(std::shared_ptr<Registry> registry, std::string name, Segment segment)
+  using Mapped = TypedSegment<TopicHeader, TopicGeometry>;
+
+  Topic(std::shared_ptr<Registry> registry, std::string name, Mapped mapped)
       : registry_{std::move(registry)},
         name_{std::move(name)},
-        segment_{std::move(segment)},
-        header_{std::launder(reinterpret_cast<TopicHeader*>(segment_.data()))},
-        geometry_{checked_geometry(name_, *header_, segment_.size())},
+        mapped_{std::move(mapped)},
+        header_{&mapped_.header()},
         // Read once more after the check: whatever it reads now, one of the two.
         overflow_{header_->overflow == static_cast<std::uint32_t>(Overflow::block) ? Overflow::block : Overflow::drop_oldest},
-        places_{.rings = reinterpret_cast<std::atomic<std::uint64_t>*>(segment_.data() + geometry_.ring_offset()),
-                .infos = std::launder(reinterpret_cast<SampleInfo*>(segment_.data() + geometry_.info_offset())),
-                .chunks = segment_.data() + geometry_.chunks_offset(),
-                .capacity = geometry_.capacity,
-                .mask = std::has_single_bit(geometry_.capacity) ? geometry_.capacity - 1 : 0,
-                .stride = geometry_.chunk_stride(),
-                .chunk_count = geometry_.chunk_count(),
-                .max_size = geometry_.max_message_size} {}
-
-  static bool is_set_up(const std::string& name, std::byte* data, std::size_t size) {
-    if (size < sizeof(TopicHeader)) return false;
-    const auto* header = std::launder(reinterpret_cast<const TopicHeader*>(data));
-    const auto magic = header->magic.load(std::memory_order_acquire);
-    if (magic == 0) return false;  // new, or its creator died setting it up
-    if (magic != kTopicMagic || header->layout != kTopicLayout)
-      throw Failure{{Errc::type_mismatch, "topic '" + name + "': made by another version of Prime (layout " +
-                                              std::to_string(header->layout) + ", this one reads " +
-                                              std::to_string(kTopicLayout) + ")"}};
-    return true;  // its geometry is checked when it is mapped (checked_geometry)
-  }
-  // The geometry `header` records, read once and checked against the segment.
-  static TopicGeometry checked_geometry(const std::string& name, const TopicHeader& header, std::size_t size) {
-    const auto geometry = TopicGeometry::of(header);
-    if (const auto what = damage(header, geometry, size); !what.empty())
-      throw Failure{{Errc::damaged, "topic '" + name + "': its shared memory is damaged (" + what + ")"}};
-    return geometry;
-  }
+        places_{.rings = reinterpret_cast<std::atomic<std::uint64_t>*>(mapped_.data() + geometry().ring_offset()),
+                .infos = std::launder(reinterpret_cast<SampleInfo*>(mapped_.data() + geometry().info_offset())),
+                .chunks = mapped_.data() + geometry().chunks_offset(),
+                .capacity = geometry().capacity,
+                .mask = std::has_single_bit(geometry().capacity) ? geometry().capacity - 1 : 0,
+                .stride = geometry().chunk_stride(),
+                .chunk_count = geometry().chunk_count(),
+                .max_size = geometry().max_message_size} {}
 
   static void set_up(std::byte* data, const Fingerprint& type, const TopicQos& qos, const TopicGeometry& geometry,
                      const std::string& schema, std::uint64_t first) {
@@ -230,9 +208,8 @@ class Topic {
 
   std::shared_ptr<Registry> registry_;  // the participant lives as long as its topics
   std::string name_;
-  Segment segment_;
-  TopicHeader* header_;
-  TopicGeometry geometry_;  // read once from the header, and checked
+  Mapped mapped_;
+  TopicHeader* header_;  // mapped_'s, at hand
   Overflow overflow_;
   Places places_;
 };
