@@ -15,9 +15,10 @@
 
 #include "prime/shm.hpp"
 #include "shm/domain.hpp"
-#include "support/futex_calls.hpp"
 #include "shm/mapped_topic.hpp"
 #include "shm/peer_process.hpp"
+#include "support/counted_and_timed.hpp"
+#include "support/futex_calls.hpp"
 
 namespace prime::test {
 namespace {
@@ -50,16 +51,10 @@ Costs compare(double ratio, A a, B b, int batches = 7, int size = 20000) {
   return costs;
 }
 
-// Each test below runs twice: ".../counted" proves the fault costs nothing
-// by its counts alone; ".../timed" also compares the publisher's speed with
-// and without it. Timed tests carry the `timing` label, which the sanitizer
-// runs skip: a sanitizer's slowdown is its own, not the code's.
-class ShmPeerFaultCosts : public ::testing::TestWithParam<bool> {
- protected:
-  static bool timed() { return GetParam(); }
-};
-INSTANTIATE_TEST_SUITE_P(Peer, ShmPeerFaultCosts, ::testing::Values(false, true),
-                         [](const auto& info) { return info.param ? "timed" : "counted"; });
+// Each test below runs twice (CountedAndTimed): the fault costs nothing by
+// its counts, and, timed, by the publisher's speed with and without it.
+class ShmPeerFaultCosts : public CountedAndTimed {};
+INSTANTIATE_TEST_SUITE_P(Peer, ShmPeerFaultCosts, ::testing::Bool(), counted_or_timed);
 
 TEST_P(ShmPeerFaultCosts, ASubscriberKilledAsleepCostsLaterPublishesNothing) {
   const auto domain = unique_domain("dead-sleeper");

@@ -20,6 +20,7 @@
 #include "shm/mapped_topic.hpp"
 #include "shm/messages.hpp"
 #include "shm/peer_process.hpp"
+#include "support/counted_and_timed.hpp"
 
 namespace prime::test {
 namespace {
@@ -154,15 +155,10 @@ TEST(ShmServiceProcesses, ARestartedServiceIsFoundAgainByTheSameHandle) {
   EXPECT_EQ(twice(50), 100) << "the same handle calls the new server";
 }
 
-// Runs twice: ".../counted" checks what is left of the dead caller;
-// ".../timed" also that the service serves as fast after it (label
-// `timing`, which the sanitizer runs skip: their slowdown is their own).
-class ShmDeadCaller : public ::testing::TestWithParam<bool> {
- protected:
-  static bool timed() { return GetParam(); }
-};
-INSTANTIATE_TEST_SUITE_P(Service, ShmDeadCaller, ::testing::Values(false, true),
-                         [](const auto& info) { return info.param ? "timed" : "counted"; });
+// Runs twice (CountedAndTimed): what is left of the dead caller, and,
+// timed, that the service serves as fast after it.
+class ShmDeadCaller : public CountedAndTimed {};
+INSTANTIATE_TEST_SUITE_P(Service, ShmDeadCaller, ::testing::Bool(), counted_or_timed);
 
 TEST_P(ShmDeadCaller, ACallerKilledMidCallLeavesNothingStuck) {
   const auto domain = unique_domain("dead-caller");

@@ -212,18 +212,26 @@ TEST(PrimeTool, EchoPrintsADescribedTypeFieldByFieldAndAnUndescribedOneAsBytes) 
   EXPECT_EQ(text(json.object().at("value"), "tag").substr(0, 1), "t");
 }
 
+// What `pub` and `call` reach: a subscriber of tool/cmd that prints each
+// sample, and an echo service tool/echo, in processes of their own.
+struct Targets {
+  explicit Targets(const std::string& domain)
+      : listener{{"listen", domain, "tool/cmd"}}, server{{"serve", domain, "tool/echo", "echo"}} {}
+  bool ready() { return listener.says("listening") && server.says("serving"); }
+  PeerProcess listener;
+  PeerProcess server;
+};
+
 TEST(PrimeTool, PubAndCallFromTheTerminalReachASubscriberAndAService) {
   const auto domain = unique_domain("tool-pub");
-  PeerProcess listener{{"listen", domain, "tool/cmd"}};
-  PeerProcess server{{"serve", domain, "tool/echo", "echo"}};
-  ASSERT_TRUE(listener.says("listening"));
-  ASSERT_TRUE(server.says("serving"));
+  Targets peers{domain};
+  ASSERT_TRUE(peers.ready());
   const auto pub = prime(domain, {"pub", "tool/cmd", "n=7", "x=1.5", "tag=hi"});
   EXPECT_EQ(pub.code, 0) << pub.out;
-  EXPECT_TRUE(listener.says("tick 7 1.500000 hi")) << "the subscriber got what the terminal sent";
+  EXPECT_TRUE(peers.listener.says("tick 7 1.500000 hi")) << "the subscriber got what the terminal sent";
   const auto json_pub = prime(domain, {"pub", "tool/cmd", R"({"n": 8, "tag": "json"})"});
   EXPECT_EQ(json_pub.code, 0) << json_pub.out;
-  EXPECT_TRUE(listener.says("tick 8 0.000000 json"));
+  EXPECT_TRUE(peers.listener.says("tick 8 0.000000 json"));
   const auto call = prime(domain, {"call", "tool/echo", "who=5", "n=14"});
   EXPECT_EQ(call.code, 0) << call.out;
   EXPECT_EQ(call.out, "who: 5\nn: 42\n");
@@ -376,10 +384,8 @@ TEST(PrimeTool, ToolsThatJoinADomainLeaveADeadOnesSegmentsAlone) {
 // and numbers of seconds or a rate no clock can hold.
 TEST(PrimeTool, MalformedInputAndOutOfRangeOptionsAreUsageErrorsNamingWhatWasWrong) {
   const auto domain = unique_domain("tool-usage");
-  PeerProcess listener{{"listen", domain, "tool/cmd"}};
-  PeerProcess server{{"serve", domain, "tool/echo", "echo"}};
-  ASSERT_TRUE(listener.says("listening"));
-  ASSERT_TRUE(server.says("serving"));
+  Targets peers{domain};
+  ASSERT_TRUE(peers.ready());
   struct Case {
     std::vector<std::string> args;
     std::string says;
@@ -404,7 +410,7 @@ TEST(PrimeTool, MalformedInputAndOutOfRangeOptionsAreUsageErrorsNamingWhatWasWro
     EXPECT_NE(run.out.find(c.says), std::string::npos) << c.args[2] << ": " << run.out;
   }
   ASSERT_EQ(prime(domain, {"pub", "tool/cmd", "n=9"}).code, 0);
-  EXPECT_EQ(listener.line_starting("tick "), "tick 9 0.000000 ") << "the first sample it got is the good one";
+  EXPECT_EQ(peers.listener.line_starting("tick "), "tick 9 0.000000 ") << "the first sample it got is the good one";
 }
 
 // Ctrl-C ends a command that had more to do with 130, so a script never
