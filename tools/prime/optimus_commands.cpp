@@ -83,12 +83,14 @@ int optimus_ls(const Options& o) {
 
 int optimus_info(const Options& o) {
   auto r = inspector(o);
-  if (const auto* s = named(r.sources(), o.name)) {
+  const auto sources = r.sources();  // named() points into these: they outlive its use
+  const auto services = r.services();
+  if (const auto* s = named(sources, o.name)) {
     std::cout << "source " << s->name << "\n  type: " << s->type << "\n  stream: " << s->stream
               << "\n  in stream: " << s->length << "\n  readers: " << s->readers << '\n';
     return kOk;
   }
-  if (const auto* v = named(r.services(), o.name)) {
+  if (const auto* v = named(services, o.name)) {
     std::cout << "service " << v->name << "\n  types: " << v->types << "\n  alive: " << (v->alive ? "yes" : "no") << '\n';
     return kOk;
   }
