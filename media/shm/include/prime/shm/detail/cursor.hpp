@@ -13,37 +13,13 @@
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
-#include "prime/shm/detail/asymmetric_fence.hpp"
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/prefetch.hpp"
+#include "prime/shm/detail/sleep_fences.hpp"
+#include "prime/shm/detail/take.hpp"
 #include "prime/shm/detail/topic.hpp"
 
 namespace prime::shm::detail {
-
-// A sample's size and stamp, as read when it was taken.
-struct TakenInfo {
-  std::uint64_t size;
-  std::int64_t stamp;
-};
-
-// A sample taken by a subscriber: its chunk, held by the subscriber's bit
-// until released.
-struct Taken {
-  std::uint32_t chunk;
-  std::uint64_t seq;
-  TakenInfo info;
-};
-
-// Sample `seq`'s size and stamp, read beside the ring as SampleInfo says;
-// none when they are not its own (the publisher is overwriting them: the
-// sample is lost).
-inline std::optional<TakenInfo> info_of(const Places& places, std::uint64_t seq) noexcept {
-  const auto& info = places.info(seq);
-  const auto word = info.word.load(std::memory_order_acquire);
-  const auto stamp = info.stamp.load(std::memory_order_acquire);
-  if (info.word.load(std::memory_order_acquire) != word || !SampleInfo::names(word, seq)) return std::nullopt;
-  return TakenInfo{places.size(SampleInfo::size_of(word)), stamp};
-}
 
 // Samples taken together for a batch of views (shm::Views): consecutive
 // sequences from `first`, let go of together.
@@ -63,7 +39,7 @@ struct TakenBatch {
 //
 // A taken sample's chunk is kept from reuse by the subscriber's bit in its
 // holders word (a hold), checked against the ring: the hold counts if the
-// ring entry that named the chunk still does (Writer::evict says why). A
+// ring entry that named the chunk still does (ChunkPool::evict says why). A
 // batch of views on a `block` topic needs none: the publisher overwrites no
 // sample a subscriber it waits for has not passed, and the cursor the
 // publisher sees stays at the first sample of the oldest such batch still
@@ -72,13 +48,13 @@ struct TakenBatch {
 // reader acknowledges what it read (every ack_every_ samples).
 // - A subscriber joining, or waited for again after the publisher passed
 //   it over, is covered so from the head it sees after its cursor is
-//   stored (see Writer::slowest for why).
+//   stored (see BackPressure::slowest for why).
 // - Its batches kept so lie between the cursor it published and the end
 //   of the newest (kept_end, in its slot), a span that with its other
 //   holds stays within max_held: older batches are held (their bits set)
 //   before a new one would reach further. So a publisher that stops
 //   waiting for it (block_timeout) holds, for it, the chunks of that span
-//   (see Writer::give_up_on_laggards), within what the topic's memory is
+//   (see BackPressure::give_up_on_laggards), within what the topic's memory is
 //   sized for; the subscriber keeps those of batches still out until they
 //   end, and lets go of the others.
 // Samples of a drop_oldest topic, and those the observer slot or a lagging
@@ -130,9 +106,7 @@ class Cursor {
     next_ = head - back;
     acked_ = next_;
     ack_every_ = std::clamp<std::uint64_t>(g.capacity / 8, 1, 16);
-    // The slot's bit in full_fences_wanted is clear: whoever freed the slot
-    // (the destructor, or reclaim_subscriber) cleared it.
-    if (!heavy_fences_allowed()) ask_for_full_fences(Clock::now());
+    fences_.emplace(h, bit_);
     h.subscribers[slot_].cursor.store(next_, std::memory_order_seq_cst);
     covered_from_ = h.head.load(std::memory_order_seq_cst);
   }
@@ -145,7 +119,7 @@ class Cursor {
     topic_->release_subscriber_holds(slot_);
     slot.lagging.store(0);
     slot.kept_end.store(0);
-    topic_->header().full_fences_wanted.fetch_and(~bit_);
+    fences_.reset();  // its bit in full_fences_wanted cleared for the slot's next owner
     slot.owner.store(0);
     topic_->wake_publisher();
   }
@@ -159,41 +133,64 @@ class Cursor {
   // look, as does a publisher lapping this reader on every look.
   std::optional<Taken> try_take() {
     retire_ended();
-    for (std::uint64_t look = 0; look <= max_looks(); ++look) {
-      const auto entry = topic_->ring(next_).load(std::memory_order_acquire);
-      const auto ahead = RingEntry::ahead(entry, next_);
-      if (ahead < 0) {
+    const auto places = topic_->places();
+    for (std::uint64_t looks = 0; looks <= max_looks(); ++looks) {
+      const auto found = look(places, next_, true);
+      if (found.is == Look::Is::not_yet) {
         caught_up();
         acknowledge_all();
         return std::nullopt;
       }
-      if (ahead == 0 && topic_->places().names_chunk(entry)) {
-        const auto index = RingEntry::chunk(entry);
-        auto& chunk = topic_->chunk(index);
-        __builtin_prefetch(topic_->payload(index));  // arrives while the hold is taken
-        const auto info = info_of(topic_->places(), next_);  // before the hold's check (SampleInfo)
-        chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
-        if (info && topic_->ring(next_).load(std::memory_order_seq_cst) == entry) {
-          // No view of it is out: its hold was released before the
-          // publisher could publish it again, so no other thread touches
-          // its count now.
-          views_[index].store(1, std::memory_order_relaxed);
-          const Taken taken{index, next_, *info};
-          advance(next_ + 1);
-          prefetch_next();
-          return taken;
-        }
-        chunk.holders.fetch_and(~bit_);
+      if (found.is == Look::Is::out && hold(places, bit_, next_, found.chunk)) {
+        // No view of it is out: its hold was released before the
+        // publisher could publish it again, so no other thread touches
+        // its count now.
+        views_[found.chunk].store(1, std::memory_order_relaxed);
+        const Taken taken{found.chunk, next_, found.info};
+        advance(next_ + 1);
+        prefetch_next();
+        return taken;
       }
       if (!skip_overwritten()) return std::nullopt;
     }
     return std::nullopt;
   }
 
+  // Up to `max` samples, appended to `out`, with one store of the cursor for
+  // them all; how many. A sample overwritten before it was taken ends the
+  // batch, and the next take skips what was lost.
+  //
+  // In the take protocol's two passes (take.hpp): the ring entries of what
+  // is out first, with their sizes and stamps, each chunk's header line
+  // fetched for writing and its payload for reading as it is found, then
+  // the holds. So the lines travel together, not one after another, each
+  // hold waiting for its own.
+  std::size_t take_some(std::size_t max, std::vector<Taken>& out) {
+    if (max == 0) return 0;
+    retire_ended();
+    const auto places = topic_->places();
+    const auto first = out.size();
+    look_ahead(places, max, true, [&](std::uint32_t chunk, const TakenInfo& info) {
+      out.push_back({chunk, next_ + (out.size() - first), info});
+    });
+    const auto held =
+        hold_in_order(places, bit_, next_, out.size() - first, [&](std::size_t i) { return out[first + i].chunk; });
+    out.resize(first + held);  // later ones are not held
+    for (auto i = first; i < out.size(); ++i) views_[out[i].chunk].store(1, std::memory_order_relaxed);
+    if (held != 0) {
+      taken_together(held);
+      return held;
+    }
+    auto taken = try_take();  // nothing in order: the single take skips a loss or notes it has caught up
+    if (!taken) return 0;
+    out.push_back(*taken);
+    return 1;
+  }
+
   // Up to `max` samples as a batch (see TakenBatch): its index, for
   // batch(); none when nothing is out (or a sample was lost: the next take
-  // goes on after it). In two passes, as take_some. `held`: the samples
-  // this subscriber has out now.
+  // goes on after it). In two passes, as take_some, but a batch the cursor
+  // keeps needs no holds. `held`: the samples this subscriber has out now.
   std::optional<std::uint32_t> take_batch(std::size_t max, std::size_t held) {
     retire_ended();
     if (max == 0 || free_.empty()) return std::nullopt;
@@ -209,114 +206,42 @@ class Cursor {
       return std::optional<std::uint32_t>{};
     };
     const auto places = topic_->places();
-    for (std::uint64_t look = 0;; ++look) {
-      if (look > max_looks()) return none();  // bounded, as try_take
-      // Each sample's size and stamp are read beside the ring: before the
-      // look at `lagging` that decides whether the cursor keeps the batch,
-      // and before a hold's check (SampleInfo says why those orders).
+    for (std::uint64_t looks = 0;; ++looks) {
+      if (looks > max_looks()) return none();  // bounded, as try_take
+      // The sizes and stamps are read (by the look) before the look at
+      // `lagging` that decides whether the cursor keeps the batch, and
+      // before a hold's check (SampleInfo says why those orders).
       const bool may_keep = may_cover(next_);
-      for (auto seq = next_; seq - next_ < max; ++seq) {
-        const auto entry = places.ring(seq).load(std::memory_order_acquire);
-        const auto ahead = RingEntry::ahead(entry, seq);
-        if (ahead != 0 || !places.names_chunk(entry)) {
-          if (seq == next_ && ahead < 0) {  // nothing new
-            caught_up();
-            acknowledge_all();
-            return none();
-          }
-          break;
-        }
-        const auto info = info_of(places, seq);
-        if (!info) break;  // being overwritten
-        const auto chunk = RingEntry::chunk(entry);
-        __builtin_prefetch(places.payload(chunk));
-        if (!may_keep) prefetch_for_write(&places.chunk(chunk));  // for the hold
+      const auto seen = look_ahead(places, max, !may_keep, [&](std::uint32_t chunk, const TakenInfo& info) {
         b.chunks.push_back(chunk);
-        b.info.push_back(*info);
-      }
+        b.info.push_back(info);
+      });
       if (b.chunks.empty()) {
+        if (seen == Look::Is::not_yet) {  // nothing new
+          caught_up();
+          acknowledge_all();
+          return none();
+        }
         if (skip_overwritten()) continue;
         return none();
       }
       if (may_keep) keep_within_reach(next_ + b.chunks.size(), held);
       b.held = !covers(next_);  // after the ring entries' and infos' loads, and kept_end's store
       if (!b.held) break;
-      for (std::size_t i = 0; i < b.chunks.size(); ++i) {
-        auto& chunk = places.chunk(b.chunks[i]);
-        chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
-        if (places.ring(next_ + i).load(std::memory_order_seq_cst) != RingEntry::pack(next_ + i, b.chunks[i])) {
-          chunk.holders.fetch_and(~bit_);
-          b.chunks.resize(i);  // later ones are not held yet
-          b.info.resize(i);
-          break;
-        }
-      }
-      if (!b.chunks.empty()) break;
+      const auto n = hold_in_order(places, bit_, next_, b.chunks.size(), [&](std::size_t i) { return b.chunks[i]; });
+      b.chunks.resize(n);  // later ones are not held
+      b.info.resize(n);
+      if (n != 0) break;
       if (!skip_overwritten()) return none();
     }
     b.first = next_;
     b.pinned = false;
     b.out.store(true, std::memory_order_relaxed);
     live_.push_back(index);
-    advance(next_ + b.chunks.size());
-    if (RingEntry::ahead(topic_->ring(next_).load(std::memory_order_acquire), next_) < 0) {
-      caught_up();
-      acknowledge();
-    }
+    taken_together(b.chunks.size());
     return index;
   }
   [[nodiscard]] TakenBatch& batch(std::uint32_t index) noexcept { return batches_[index]; }
-
-  // Up to `max` samples, appended to `out`, with one store of the cursor for
-  // them all; how many. A sample overwritten before it was taken ends the
-  // batch, and the next take skips what was lost.
-  //
-  // In two passes: the ring entries of what is out first, with their sizes
-  // and stamps, each chunk's header line fetched for writing and its
-  // payload for reading as it is found, then the holds. So the lines travel
-  // together, not one after another, each hold waiting for its own.
-  std::size_t take_some(std::size_t max, std::vector<Taken>& out) {
-    if (max == 0) return 0;
-    retire_ended();
-    const auto places = topic_->places();
-    const auto first = out.size();
-    for (auto seq = next_; seq - next_ < max; ++seq) {
-      const auto entry = places.ring(seq).load(std::memory_order_acquire);
-      if (RingEntry::ahead(entry, seq) != 0 || !places.names_chunk(entry)) break;
-      const auto info = info_of(places, seq);  // before the hold's check (SampleInfo)
-      if (!info) break;
-      const auto index = RingEntry::chunk(entry);
-      prefetch_for_write(&places.chunk(index));
-      __builtin_prefetch(places.payload(index));
-      out.push_back({index, seq, *info});
-    }
-    for (auto i = first; i < out.size(); ++i) {
-      auto& chunk = places.chunk(out[i].chunk);
-      chunk.holders.fetch_or(bit_, std::memory_order_seq_cst);
-      if (places.ring(out[i].seq).load(std::memory_order_seq_cst) != RingEntry::pack(out[i].seq, out[i].chunk)) {
-        chunk.holders.fetch_and(~bit_);
-        out.resize(i);  // later ones are not held yet
-        break;
-      }
-      views_[out[i].chunk].store(1, std::memory_order_relaxed);
-    }
-    if (out.size() != first) {
-      const auto seq = out.back().seq + 1;
-      const auto n = seq - next_;
-      advance(seq);
-      // Read everything published: a subscriber passed over is waited for
-      // again, and the publisher learns how far it is.
-      if (RingEntry::ahead(topic_->ring(seq).load(std::memory_order_acquire), seq) < 0) {
-        caught_up();
-        acknowledge();
-      }
-      return n;
-    }
-    auto taken = try_take();  // nothing in order: the single take skips a loss or notes it has caught up
-    if (!taken) return 0;
-    out.push_back(*taken);
-    return 1;
-  }
 
   // Moves on to the newest sample published, passing over the older unread
   // ones (read past, not lost): for a reader that wants only the latest.
@@ -344,7 +269,7 @@ class Cursor {
   template <class Woken>
   void sleep_until(Woken&& woken, Clock::time_point until) {
     topic_->header().data.sleep_until(
-        bit_, [&] { return available() || woken(); }, until, [&] { return fence_before_sleep(); });
+        bit_, [&] { return available() || woken(); }, until, [&] { return fences_->before_sleep(); });
   }
 
   void release(std::uint32_t chunk) const noexcept { topic_->chunk(chunk).holders.fetch_and(~bit_); }
@@ -375,7 +300,7 @@ class Cursor {
   void acknowledge_all() noexcept {
     retire_ended();
     for (const auto i : live_)
-      if (kept_by_cursor(batches_[i])) hold(batches_[i]);
+      if (kept_by_cursor(batches_[i])) hold_all(batches_[i]);
     acknowledge();
   }
 
@@ -388,6 +313,29 @@ class Cursor {
 
  private:
   static constexpr std::size_t kNone = ~std::size_t{0};
+
+  // The take protocol's first pass for a take of up to `max` samples from
+  // next_: found(chunk, info) for each sample out, in order, up to the
+  // first that is not; what the look at next_ found.
+  template <class Found>
+  Look::Is look_ahead(const Places& places, std::size_t max, bool for_hold, Found&& found) noexcept {
+    for (std::size_t i = 0; i < max; ++i) {
+      const auto seen = look(places, next_ + i, for_hold);
+      if (seen.is != Look::Is::out) return i == 0 ? seen.is : Look::Is::out;
+      found(seen.chunk, seen.info);
+    }
+    return Look::Is::out;
+  }
+  // `n` samples from next_ were taken together: the cursor moves past
+  // them. A reader that has read everything published is waited for again
+  // (if it was passed over), and the publisher learns how far it is.
+  void taken_together(std::uint64_t n) {
+    advance(next_ + n);
+    if (RingEntry::ahead(topic_->ring(next_).load(std::memory_order_acquire), next_) < 0) {
+      caught_up();
+      acknowledge();
+    }
+  }
 
   void skip_to(std::uint64_t seq) {
     lost_ += seq - next_;
@@ -464,7 +412,7 @@ class Cursor {
     while (over()) {
       const auto oldest = std::find_if(live_.begin(), live_.end(), [&](auto i) { return kept_by_cursor(batches_[i]); });
       if (oldest == live_.end()) break;
-      hold(batches_[*oldest]);
+      hold_all(batches_[*oldest]);
       acknowledge();
     }
     if (end > kept_end_) {
@@ -475,7 +423,7 @@ class Cursor {
   // A batch the cursor kept is held from now on (its holds go when it
   // ends): the cursor may pass it. Its chunks cannot have been reused, the
   // cursor the publisher sees being at or before its first sample.
-  void hold(TakenBatch& b) noexcept {
+  void hold_all(TakenBatch& b) noexcept {
     for (const auto c : b.chunks) topic_->chunk(c).holders.fetch_or(bit_, std::memory_order_seq_cst);
     b.pinned = true;
   }
@@ -536,43 +484,6 @@ class Cursor {
         next_ >= topic_->header().space_wanted.load(std::memory_order_relaxed))
       acknowledge();
   }
-  // The heavy half of the fence before a sleep, when the publisher fences
-  // lightly; how long the sleep may last. It interrupts every CPU running a
-  // process that publishes lightly, so a subscriber runs at most
-  // kHeavyPerWindow of them per kWindow: one that sleeps more often than
-  // that asks the publisher for full fences instead (as one refused
-  // membarrier does for good), until it sleeps less again.
-  Clock::time_point fence_before_sleep() {
-    const auto now = Clock::now();
-    if (now >= window_end_) {
-      if (full_fences_asked_ && !refused_ && sleeps_ < kHeavyPerWindow / 2) stop_asking_for_full_fences();
-      window_end_ = now + kWindow;
-      sleeps_ = 0;
-    }
-    ++sleeps_;
-    if (topic_->header().light_publisher.load(std::memory_order_seq_cst) != 0 && !full_fences_asked_) {
-      if (sleeps_ <= kHeavyPerWindow && heavy_fence()) return Clock::time_point::max();
-      ask_for_full_fences(now);
-    }
-    return now < slices_until_ ? now + kSlice : Clock::time_point::max();
-  }
-  // A publish under way may have looked at the bits before this one was
-  // raised, and fenced lightly: one heavy fence covers it. Where the system
-  // refuses that, sleeps are cut into slices for a while instead: a publish
-  // it missed is seen a slice later.
-  void ask_for_full_fences(Clock::time_point now) {
-    topic_->header().full_fences_wanted.fetch_or(bit_, std::memory_order_seq_cst);
-    full_fences_asked_ = true;
-    if (refused_ || !heavy_fence()) {
-      refused_ = true;
-      slices_until_ = now + kSlicesFor;
-    }
-  }
-  void stop_asking_for_full_fences() {
-    topic_->header().full_fences_wanted.fetch_and(~bit_, std::memory_order_seq_cst);
-    full_fences_asked_ = false;
-  }
-
   // A subscriber the publisher stopped waiting for is waited for again once
   // it has read everything.
   //
@@ -611,17 +522,7 @@ class Cursor {
   std::uint64_t ack_every_ = 1;
   std::uint64_t lost_ = 0;
   std::optional<Error> damage_;
-  // Sleeps in the current window, and whether this subscriber asked for
-  // full fences (for good once membarrier was refused).
-  static constexpr auto kWindow = std::chrono::milliseconds{100};
-  static constexpr std::uint32_t kHeavyPerWindow = 100;
-  Clock::time_point window_end_{};
-  std::uint32_t sleeps_ = 0;
-  bool full_fences_asked_ = false;
-  bool refused_ = false;
-  static constexpr auto kSlice = std::chrono::milliseconds{1};
-  static constexpr auto kSlicesFor = std::chrono::milliseconds{100};
-  Clock::time_point slices_until_{};
+  std::optional<SleepFences> fences_;  // from when the slot is taken to when it is let go
 };
 
 }  // namespace prime::shm::detail

@@ -150,7 +150,7 @@ struct alignas(64) SubscriberSlot {
   // waiting for this subscriber (it read nothing for block_timeout): it is
   // then passed over like a drop_oldest reader, until it has caught up and
   // clears this. kPinning while the publisher holds chunks for it (see
-  // Writer::give_up_on_laggards), then kPassedOver.
+  // BackPressure::give_up_on_laggards), then kPassedOver.
   std::atomic<std::uint32_t> lagging{0};
   // The end of the newest batch its cursor keeps (Cursor::take_batch): the
   // span from its cursor to here is what a publisher that stops waiting
