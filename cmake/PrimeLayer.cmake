@@ -22,15 +22,18 @@ function(prime_header_layer name)
 endfunction()
 
 # prime_compiled_layer(<name> SOURCES <files>... ABI <n> [EXPORT <export-set>]
-#                      [LINKS <targets>...] [BUILD_LINKS <targets>...])
+#                      [LINKS <targets>...] [BUILD_LINKS <targets>...]
+#                      [PRIVATE_LINKS <targets>...])
 # A compiled Prime medium: `prime::<name>` (shared, libprime_<name>.so.<n>)
 # and `prime::<name>_static` (static, libprime_<name>.a), from one set of
-# objects, headers under ./include. LINKS reach the users; BUILD_LINKS
-# (header-only libraries the sources use) stay inside the library, so no
-# user translation unit includes them and an installed Prime does not ask
-# for them. <n> is the library's ABI version (SOVERSION).
+# objects, headers under ./include. LINKS reach the users. BUILD_LINKS
+# (header-only libraries the sources use) stay inside the library: no user
+# translation unit includes them and an installed Prime does not ask for
+# them. PRIVATE_LINKS are linked into the library, not into its users'
+# compilations (the static library's users link them too). <n> is the
+# library's ABI version (SOVERSION).
 function(prime_compiled_layer name)
-  cmake_parse_arguments(PARSE_ARGV 1 arg "" "EXPORT;ABI" "SOURCES;LINKS;BUILD_LINKS")
+  cmake_parse_arguments(PARSE_ARGV 1 arg "" "EXPORT;ABI" "SOURCES;LINKS;BUILD_LINKS;PRIVATE_LINKS")
   if(NOT arg_EXPORT)
     set(arg_EXPORT primeTargets)
   endif()
@@ -39,7 +42,7 @@ function(prime_compiled_layer name)
   target_include_directories(prime_${name}_objects PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/include)
   target_compile_features(prime_${name}_objects PRIVATE cxx_std_23)
   target_compile_options(prime_${name}_objects PRIVATE -Wall -Wextra)
-  target_link_libraries(prime_${name}_objects PRIVATE ${arg_LINKS} ${arg_BUILD_LINKS})
+  target_link_libraries(prime_${name}_objects PRIVATE ${arg_LINKS} ${arg_BUILD_LINKS} ${arg_PRIVATE_LINKS})
   foreach(kind IN ITEMS SHARED STATIC)
     if(kind STREQUAL "SHARED")
       set(target prime_${name})
@@ -56,7 +59,7 @@ function(prime_compiled_layer name)
       $<BUILD_INTERFACE:${CMAKE_CURRENT_SOURCE_DIR}/include>
       $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
     target_compile_features(${target} PUBLIC cxx_std_23)
-    target_link_libraries(${target} PUBLIC ${arg_LINKS})
+    target_link_libraries(${target} PUBLIC ${arg_LINKS} PRIVATE ${arg_PRIVATE_LINKS})
     install(TARGETS ${target} EXPORT ${arg_EXPORT}
             LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR} ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR})
   endforeach()

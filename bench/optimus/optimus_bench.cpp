@@ -84,8 +84,8 @@ void BM_Hiredis_RequestReply(benchmark::State& state) {
       if (answer_pending && !c.reply()) return;
       auto got = c.reply();
       if (!got) return;
-      answer_pending = (*got)->type == REDIS_REPLY_ARRAY;
-      if (answer_pending) answer.assign((*got)->element[1]->str, (*got)->element[1]->len);
+      answer_pending = (*got)->is_array();
+      if (answer_pending) answer.assign((**got)[1].text());
     }
     if (answer_pending) (void)c.command({"RPUSH", replies, answer});
   }};
@@ -98,7 +98,7 @@ void BM_Hiredis_RequestReply(benchmark::State& state) {
     c.append({"BLPOP", replies, "1"});
     auto pushed = c.reply();
     auto answer = c.reply();
-    if (!pushed || !answer || (*answer)->type != REDIS_REPLY_ARRAY) {
+    if (!pushed || !answer || !(*answer)->is_array()) {
       state.SkipWithError("the hand-written echo did not answer");
       break;
     }

@@ -50,9 +50,17 @@ not_found() {
   echo "$name: not found, naming $missing"
 }
 
-# No installed header includes Boost: Shm's use of it is compiled in.
-if grep -rlE '#include <boost/' "$work/prefix/include"; then fail "installed headers include Boost (above)" ""; fi
-echo "no installed header includes Boost"
+# No installed header includes Boost or hiredis: the media's use of them is
+# compiled into libprime_shm and libprime_optimus.
+if grep -rlE '#include <(boost|hiredis)/' "$work/prefix/include"; then
+  fail "installed headers include Boost or hiredis (above)" ""
+fi
+echo "no installed header includes Boost or hiredis"
+for library in libprime_shm.so libprime_shm.a libprime_optimus.so libprime_optimus.a; do
+  compgen -G "$work/prefix/lib*/$library" >/dev/null || compgen -G "$work/prefix/lib*/*/$library" >/dev/null ||
+    fail "$library is not installed" ""
+done
+echo "libprime_shm and libprime_optimus installed, shared and static"
 consumer core -DPRIME_LOADED=shm "$hide_boost" "$hide_hiredis"
 [[ -x $work/core/media_consumer ]] && fail "core: the media were linked though their dependencies are hidden" ""
 consumer media "-DPRIME_COMPONENTS=shm;optimus" "-DPRIME_LOADED=shm;optimus"

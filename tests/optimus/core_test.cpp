@@ -175,9 +175,9 @@ TEST_F(OptimusCore, DomainsSharingAServerDoNotSeeEachOther) {
   EXPECT_EQ((b.service<int, int>("step")(10)), 9);
   RawRedis raw{shared_redis().url()};
   auto keys = raw.command({"KEYS", domain + "-*"});
-  ASSERT_GT(keys->elements, 0u);
-  for (std::size_t i = 0; i < keys->elements; ++i) {
-    const auto key = optimus::detail::text(*keys->element[i]);
+  ASSERT_GT(keys->size(), 0u);
+  for (std::size_t i = 0; i < keys->size(); ++i) {
+    const auto key = optimus::detail::text((*keys)[i]);
     EXPECT_TRUE(key.starts_with(domain + "-a:") || key.starts_with(domain + "-b:")) << key;
   }
 }

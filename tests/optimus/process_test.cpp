@@ -100,7 +100,7 @@ TEST_F(OptimusProcess, AKilledBlockReaderIsWaitedForOnlyUntilItsLeaseRunsOut) {
   RawRedis raw{shared_redis().url()};
   const auto leases = domain + ":readers:held:lease:*";
   const auto give_up = Clock::now() + 10s;
-  while (raw.command({"KEYS", leases})->elements != 0) {  // the server's clock runs the lease out
+  while (raw.command({"KEYS", leases})->size() != 0) {  // the server's clock runs the lease out
     ASSERT_LT(Clock::now(), give_up) << "the dead reader's lease never ran out";
     std::this_thread::sleep_for(50ms);  // a poll of the server, not a wait for anything of ours
   }
@@ -138,7 +138,7 @@ TEST_F(OptimusProcess, KilledBlockReadersLeaveNothingInTheReadersHash) {
   const auto readers = domain + ":readers:held";
   const auto leases_gone = [&] {
     const auto give_up = Clock::now() + 10s;
-    while (raw.command({"KEYS", readers + ":lease:*"})->elements != 0) {  // the server's clock runs them out
+    while (raw.command({"KEYS", readers + ":lease:*"})->size() != 0) {  // the server's clock runs them out
       if (Clock::now() > give_up) return false;
       std::this_thread::sleep_for(50ms);  // a poll of the server, not a wait for anything of ours
     }
@@ -184,7 +184,7 @@ TEST_F(OptimusProcess, ABlockReaderThatPausedWithRoomReadsOnWithoutAWarning) {
   ASSERT_TRUE(reader.read_for(5s));
   RawRedis raw{shared_redis().url()};
   const auto give_up = Clock::now() + 10s;
-  while (raw.command({"KEYS", domain + ":readers:paused:lease:*"})->elements != 0) {  // the server's clock runs it out
+  while (raw.command({"KEYS", domain + ":readers:paused:lease:*"})->size() != 0) {  // the server's clock runs it out
     ASSERT_LT(Clock::now(), give_up) << "the lease never ran out";
     std::this_thread::sleep_for(50ms);  // a poll of the server, not a wait for anything of ours
   }

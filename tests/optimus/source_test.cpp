@@ -134,8 +134,8 @@ TEST_F(OptimusSource, ABatchAfterItsStreamWasDeletedBeginsItAgainAndTheReaderFol
   ASSERT_TRUE(pub.publish_all(std::span{batch}.first(300)));
   ASSERT_EQ(reader.read_all().size(), 300u);
   const auto old_epoch = raw.command({"XREVRANGE", pub.source().key(), "+", "-", "COUNT", "1"});
-  ASSERT_EQ(old_epoch->elements, 1u);
-  const std::string old_id{optimus::detail::text(*old_epoch->element[0]->element[0])};
+  ASSERT_EQ(old_epoch->size(), 1u);
+  const std::string old_id{optimus::detail::text((*old_epoch)[0][0])};
   ASSERT_EQ(raw.integer({"DEL", pub.source().key()}), 1);
   ASSERT_TRUE(pub.publish_all(std::span{batch}.last(300)));
   auto all = reader.read_all();
@@ -144,7 +144,7 @@ TEST_F(OptimusSource, ABatchAfterItsStreamWasDeletedBeginsItAgainAndTheReaderFol
   EXPECT_EQ(reader.lost(), 0u);
   const auto first = raw.command({"XRANGE", pub.source().key(), "-", "+", "COUNT", "1"});
   const auto old_id_parts = optimus::detail::entry_id(old_id);
-  const auto new_id = optimus::detail::entry_id(optimus::detail::text(*first->element[0]->element[0]));
+  const auto new_id = optimus::detail::entry_id(optimus::detail::text((*first)[0][0]));
   ASSERT_TRUE(old_id_parts && new_id);
   EXPECT_GT(new_id->epoch, old_id_parts->epoch) << "a later epoch";
   EXPECT_EQ(new_id->seq, 1u) << "numbered from the start";
@@ -360,7 +360,7 @@ TEST_F(OptimusSource, ABlockReaderStruckOffForNotReadingSaysSoWhenItReadsAgain) 
   EXPECT_EQ(dropped->value.code, Errc::overflow) << dropped->value.describe();
   RawRedis raw{shared_redis().url()};
   const auto readers = domain + ":readers:cmds";
-  ASSERT_TRUE(eventually([&] { return raw.command({"KEYS", readers + ":lease:*"})->elements == 0; }, 10s))
+  ASSERT_TRUE(eventually([&] { return raw.command({"KEYS", readers + ":lease:*"})->size() == 0; }, 10s))
       << "the server runs the lease out";
   ASSERT_TRUE(pub.publish(3));
   EXPECT_EQ(raw.integer({"HLEN", readers}), 0) << "struck off, with its count";

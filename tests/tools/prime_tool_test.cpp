@@ -655,7 +655,7 @@ TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndTheWatchCommandsRead
     ASSERT_TRUE(raw);
     auto fields = raw->command({"HLEN", domain + ":readers:stalled"});
     ASSERT_TRUE(fields);
-    ASSERT_EQ((*fields)->integer, 2) << "a progress and a lost field";
+    ASSERT_EQ((*fields)->integer(), 2) << "a progress and a lost field";
   }
   const auto listed = last_json(prime(domain, {"--redis", server.url(), "--json", "ls"}).out);
   int listed_stalled = 0;

@@ -37,7 +37,7 @@ class RawRedis {
     if (!r) throw Failure{r.error()};
     return std::move(*r);
   }
-  long long integer(optimus::detail::Args args) { return command(args)->integer; }
+  long long integer(optimus::detail::Args args) { return command(args)->integer(); }
   std::string text(optimus::detail::Args args) { return std::string{optimus::detail::text(*command(args))}; }
 
  private:

@@ -100,18 +100,18 @@ inline std::expected<std::string, Error> call_segment(const Segment& segment, st
     connection.append({"EXISTS", alive_key(segment.keys.front())});
     auto removed = connection.reply();
     auto alive = connection.reply();
-    const bool withdrawn = removed && (*removed)->type == REDIS_REPLY_INTEGER && (*removed)->integer == 1;
-    const bool dead = alive && (*alive)->type == REDIS_REPLY_INTEGER && (*alive)->integer == 0;
+    const bool withdrawn = removed && (*removed)->is_integer() && (*removed)->integer() == 1;
+    const bool dead = alive && (*alive)->is_integer() && (*alive)->integer() == 0;
     if (withdrawn && dead)
       return std::unexpected(Error{Errc::peer_dead, what() + ": no live worker serves '" + segment.names.front() +
                                                         "' (no answer within " + ms + " ms)"});
     return std::unexpected(Error{Errc::timeout, what() + ": no answer within " + ms + " ms" +
                                                     (withdrawn ? " (the request was never taken; withdrawn)" : "")});
   }
-  if ((**answer).type != REDIS_REPLY_ARRAY || (**answer).elements != 2)
+  if (!(**answer).is_array() || (**answer).size() != 2)
     return std::unexpected(Error{Errc::type_mismatch, what() + ": an unexpected reply to BLPOP"});
-  const auto* value = (**answer).element[1];
-  auto response = decode_response(text(*value));
+  const auto value = (**answer)[1];
+  auto response = decode_response(text(value));
   if (!response) return std::unexpected(Error{Errc::type_mismatch, what() + ": reply key '" + reply + "' held " + response.error()});
   if (response->id != id)
     return std::unexpected(Error{Errc::type_mismatch, what() + ": an answer to request " + std::to_string(response->id) +

@@ -84,7 +84,7 @@ class Inspector {
         // At least 1 ms: BLOCK 0 would wait for ever.
         const auto ms = std::max<long long>(1, std::chrono::duration_cast<std::chrono::milliseconds>(timeout).count());
         auto reply = inspector_->command({"XREAD", "COUNT", "100", "BLOCK", std::to_string(ms), "STREAMS", stream_, last_});
-        if (reply->type == REDIS_REPLY_ARRAY && reply->elements > 0) read(*reply->element[0]);
+        if (reply->is_array() && reply->size() > 0) read((*reply)[0]);
       }
       if (buffered_.empty()) return std::nullopt;
       auto front = std::move(buffered_.front());
@@ -98,21 +98,21 @@ class Inspector {
 
     // [stream, [[id, [field, value, ...]], ...]]: checked, since another
     // process wrote it.
-    void read(const redisReply& stream) {
-      if (stream.type != REDIS_REPLY_ARRAY || stream.elements < 2 || stream.element[1]->type != REDIS_REPLY_ARRAY) return;
-      const auto& entries = *stream.element[1];
-      for (std::size_t i = 0; i < entries.elements; ++i) {
-        const auto& e = *entries.element[i];
-        if (e.type != REDIS_REPLY_ARRAY || e.elements < 2 || e.element[0]->type != REDIS_REPLY_STRING) continue;
-        const std::string id{e.element[0]->str, e.element[0]->len};
+    void read(detail::ReplyRef stream) {
+      if (!stream.is_array() || stream.size() < 2 || !stream[1].is_array()) return;
+      const auto entries = stream[1];
+      for (std::size_t i = 0; i < entries.size(); ++i) {
+        const auto e = entries[i];
+        if (!e.is_array() || e.size() < 2 || !e[0].is_string()) continue;
+        const std::string id{e[0].text()};
         last_ = id;
         StreamEntry out;
         if (const auto parsed = detail::entry_id(id)) out.sequence = parsed->seq;
-        const auto& fields = *e.element[1];
-        if (fields.type == REDIS_REPLY_ARRAY)
-          for (std::size_t f = 0; f + 1 < fields.elements; f += 2) {
-            const std::string_view name{fields.element[f]->str, fields.element[f]->len};
-            const std::string_view value{fields.element[f + 1]->str, fields.element[f + 1]->len};
+        const auto fields = e[1];
+        if (fields.is_array())
+          for (std::size_t f = 0; f + 1 < fields.size(); f += 2) {
+            const auto name = fields[f].text();
+            const auto value = fields[f + 1].text();
             if (name == "d") out.data = std::string{value};
             std::int64_t ns = 0;
             if (name == "t" && std::from_chars(value.data(), value.data() + value.size(), ns).ec == std::errc{})
@@ -144,24 +144,23 @@ class Inspector {
     const std::vector<std::string_view> args(words.begin(), words.end());
     auto reply = connection_.command(args);
     if (!reply) throw Failure{reply.error()};
-    if ((*reply)->type == REDIS_REPLY_ERROR)
-      throw Failure{{Errc::unreachable, "redis at " + server() + ": " + std::string{(*reply)->str, (*reply)->len}}};
+    if ((*reply)->is_error())
+      throw Failure{{Errc::unreachable, "redis at " + server() + ": " + std::string{(*reply)->text()}}};
     return std::move(*reply);
   }
 
   std::map<std::string, std::string> hash(const std::string& key) {
     std::map<std::string, std::string> out;
     auto reply = command({"HGETALL", key});
-    if (reply->type != REDIS_REPLY_ARRAY) return out;
-    for (std::size_t i = 0; i + 1 < reply->elements; i += 2)
-      out[std::string{reply->element[i]->str, reply->element[i]->len}] =
-          std::string{reply->element[i + 1]->str, reply->element[i + 1]->len};
+    if (!reply->is_array()) return out;
+    for (std::size_t i = 0; i + 1 < reply->size(); i += 2)
+      out[std::string{(*reply)[i].text()}] = std::string{(*reply)[i + 1].text()};
     return out;
   }
 
   long long integer(const std::vector<std::string>& words) {
     auto reply = command(words);
-    return reply->type == REDIS_REPLY_INTEGER ? reply->integer : 0;
+    return reply->integer();
   }
 
   // A source's readers: the "r<id>" fields of its readers hash (a reader
@@ -169,8 +168,8 @@ class Inspector {
   long long readers(const std::string& source) {
     auto reply = command({"HKEYS", detail::readers_key(options_.domain, source)});
     long long n = 0;
-    for (std::size_t i = 0; i < reply->elements; ++i)
-      if (reply->element[i]->len > 0 && reply->element[i]->str[0] == 'r') ++n;
+    for (std::size_t i = 0; i < reply->size(); ++i)
+      if ((*reply)[i].text().starts_with('r')) ++n;
     return n;
   }
 

@@ -1,17 +1,8 @@
 #pragma once
 
-#include <hiredis/hiredis.h>
-#include <pthread.h>
-#include <sys/socket.h>
-#include <sys/time.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <charconv>
 #include <chrono>
-#include <csignal>
-#include <cstring>
-#include <ctime>
 #include <expected>
 #include <functional>
 #include <initializer_list>
@@ -27,6 +18,7 @@
 
 #include "prime/logic/error.hpp"
 #include "prime/optimus/detail/escape.hpp"
+#include "prime/optimus/detail/reply.hpp"
 #include "prime/optimus/options.hpp"
 
 namespace prime::optimus::detail {
@@ -110,54 +102,6 @@ inline std::expected<std::optional<Credentials>, Error> credentials(const Option
   return std::optional<Credentials>{std::move(c)};
 }
 
-struct ReplyDeleter {
-  void operator()(redisReply* r) const noexcept { freeReplyObject(r); }
-};
-using Reply = std::unique_ptr<redisReply, ReplyDeleter>;
-
-struct ContextDeleter {
-  void operator()(redisContext* c) const noexcept { redisFree(c); }
-};
-
-inline timeval to_timeval(std::chrono::microseconds d) {
-  if (d < std::chrono::microseconds{1000}) d = std::chrono::microseconds{1000};
-  return timeval{static_cast<time_t>(d.count() / 1'000'000), static_cast<suseconds_t>(d.count() % 1'000'000)};
-}
-
-// A write on a socket whose peer has gone (a server killed, a connection shut
-// down by a stop) raises SIGPIPE, which ends the process unless handled, and
-// hiredis writes with write(2), which cannot be told not to. So while one of
-// these lives, SIGPIPE is blocked in this thread, and one a write raised is
-// taken back when it ends: the write fails with EPIPE, which the connection
-// reports as an error like any other.
-class NoSigpipe {
- public:
-  NoSigpipe() noexcept {
-    sigemptyset(&pipe_);
-    sigaddset(&pipe_, SIGPIPE);
-    sigset_t pending;
-    sigpending(&pending);
-    already_pending_ = sigismember(&pending, SIGPIPE) == 1;  // not ours to take
-    pthread_sigmask(SIG_BLOCK, &pipe_, &before_);
-  }
-  NoSigpipe(const NoSigpipe&) = delete;
-  NoSigpipe& operator=(const NoSigpipe&) = delete;
-  ~NoSigpipe() {
-    if (!already_pending_) {
-      sigset_t pending;
-      sigpending(&pending);
-      const timespec now{};
-      if (sigismember(&pending, SIGPIPE) == 1) sigtimedwait(&pipe_, nullptr, &now);
-    }
-    pthread_sigmask(SIG_SETMASK, &before_, nullptr);
-  }
-
- private:
-  sigset_t pipe_{};
-  sigset_t before_{};
-  bool already_pending_ = false;
-};
-
 // A command's words. Views: the strings must outlive the call.
 using Args = std::initializer_list<std::string_view>;
 
@@ -168,47 +112,20 @@ inline constexpr std::size_t kDefaultMaxBulk = std::size_t{512} << 20;
 // envelope (envelope.hpp) gives its payload a 32-bit length.
 inline constexpr std::size_t kMaxEnvelope = 0xffffffffu;
 
-// One connection to the server. Not thread-safe: hiredis contexts are not, so
-// each thread uses its own (see Pool). After an I/O error it is `broken()` and
+// One connection to the server, through hiredis (in the compiled library:
+// connection.cpp). Not thread-safe: hiredis contexts are not, so each
+// thread uses its own (see Pool). After an I/O error it is `broken()` and
 // must be dropped: a reply may be half read.
 class Connection {
  public:
-  static std::expected<Connection, Error> open(const Options& options, const Endpoint& endpoint) {
-    const auto& url = endpoint.shown;
-    auto auth = credentials(options, endpoint);
-    if (!auth) return std::unexpected(std::move(auth.error()));
-    const auto tv = to_timeval(options.connect_timeout);
-    std::unique_ptr<redisContext, ContextDeleter> ctx{
-        endpoint.unix_socket ? redisConnectUnixWithTimeout(endpoint.path.c_str(), tv)
-                             : redisConnectWithTimeout(endpoint.host.c_str(), endpoint.port, tv)};
-    if (!ctx) return std::unexpected(Error{Errc::unreachable, "redis at " + url + ": out of memory"});
-    if (ctx->err)
-      return std::unexpected(Error{Errc::unreachable, "redis at " + url + " is unreachable: " + ctx->errstr});
-    Connection c{std::move(ctx), url};
-    if (!c.set_timeout(options.connect_timeout))
-      return std::unexpected(Error{Errc::unreachable, "redis at " + url + ": cannot set a socket timeout"});
-    if (const auto& who = *auth) {
-      auto reply = who->username.empty() ? c.command({"AUTH", who->password})
-                                         : c.command({"AUTH", who->username, who->password});
-      if (!reply) return std::unexpected(std::move(reply.error()));
-      if ((*reply)->type == REDIS_REPLY_ERROR)
-        return std::unexpected(Error{Errc::unreachable, "redis at " + url + " refused AUTH" +
-                                                            (who->username.empty() ? "" : " as '" + who->username + "'") +
-                                                            ": " + std::string{(*reply)->str, (*reply)->len}});
-    }
-    return c;
-  }
+  static std::expected<Connection, Error> open(const Options& options, const Endpoint& endpoint);
 
-  Connection(Connection&&) noexcept = default;
-  Connection& operator=(Connection&&) noexcept = default;
+  Connection(Connection&&) noexcept;
+  Connection& operator=(Connection&&) noexcept;
+  ~Connection();
 
   // Bounds every blocking read and write on the socket from now on.
-  bool set_timeout(std::chrono::microseconds timeout) {
-    if (timeout == timeout_) return true;
-    if (redisSetTimeout(ctx_.get(), to_timeval(timeout)) != REDIS_OK) return false;
-    timeout_ = timeout;
-    return true;
-  }
+  bool set_timeout(std::chrono::microseconds timeout);
 
   // Queues a command; nothing is sent until a reply is asked for. Written
   // out here (an array of bulk strings), not by hiredis's own formatting
@@ -216,40 +133,12 @@ class Connection {
   // A command with a string longer than the server takes is not sent: the
   // server would drop the connection. It breaks this one instead, and the
   // reply says why (callers check a message with fits() before that).
-  void append(std::span<const std::string_view> args) {
-    ++pending_;
-    unsent_ = true;
-    for (const auto a : args)
-      if (a.size() > max_bulk_) {
-        oversized_ = a.size();
-        broken_ = true;
-      }
-    if (broken_) return;  // nothing more is sent on it
-    command_.clear();
-    put_length('*', args.size());
-    for (const auto a : args) {
-      put_length('$', a.size());
-      command_.append(a);
-      command_.append("\r\n");
-    }
-    if (redisAppendFormattedCommand(ctx_.get(), command_.data(), command_.size()) != REDIS_OK) broken_ = true;
-  }
+  void append(std::span<const std::string_view> args);
   void append(Args args) { append(std::span<const std::string_view>{args.begin(), args.size()}); }
 
   // The next queued command's reply (sending what is queued first). An error
   // reply from the server is a reply, not an Error: callers judge it.
-  std::expected<Reply, Error> reply() {
-    if (pending_ > 0) --pending_;
-    if (broken_) return std::unexpected(io_error());
-    void* raw = nullptr;
-    std::optional<NoSigpipe> writing;  // redisGetReply sends what is queued first
-    if (std::exchange(unsent_, false)) writing.emplace();
-    if (redisGetReply(ctx_.get(), &raw) != REDIS_OK || raw == nullptr) {
-      broken_ = true;
-      return std::unexpected(io_error());
-    }
-    return Reply{static_cast<redisReply*>(raw)};
-  }
+  std::expected<Reply, Error> reply();
 
   std::expected<Reply, Error> command(std::span<const std::string_view> args) {
     append(args);
@@ -258,19 +147,7 @@ class Connection {
   std::expected<Reply, Error> command(Args args) { return command(std::span<const std::string_view>{args.begin(), args.size()}); }
 
   // Sends what is queued, without reading anything back.
-  bool flush() {
-    if (broken_) return false;
-    unsent_ = false;
-    const NoSigpipe writing;
-    int done = 0;
-    while (!done) {
-      if (redisBufferWrite(ctx_.get(), &done) != REDIS_OK) {
-        broken_ = true;
-        return false;
-      }
-    }
-    return true;
-  }
+  bool flush();
 
   // Reads and drops the replies of commands queued but not yet read.
   bool drain() {
@@ -283,18 +160,7 @@ class Connection {
   // proto-max-bulk-len), which fits() goes by from then on; it stays the
   // default where the server does not say (CONFIG refused by an ACL, or
   // renamed away). A round trip: Pool asks once per connection it opens.
-  std::expected<void, Error> learn_max_bulk() {
-    auto r = command({"CONFIG", "GET", "proto-max-bulk-len"});
-    if (!r) return std::unexpected(std::move(r.error()));
-    const auto& reply = **r;
-    if (reply.type != REDIS_REPLY_ARRAY || reply.elements != 2 || reply.element[1]->str == nullptr) return {};
-    const std::string_view value{reply.element[1]->str, reply.element[1]->len};
-    std::size_t max = 0;
-    if (const auto [end, ec] = std::from_chars(value.data(), value.data() + value.size(), max);
-        ec == std::errc{} && end == value.data() + value.size() && max > 0)
-      max_bulk_ = std::min<std::size_t>(max, kMaxEnvelope);
-    return {};
-  }
+  std::expected<void, Error> learn_max_bulk();
 
   // Whether a string of `bytes` (a message, or one wrapped for a service)
   // goes to the server in one piece; else an error naming `what` and both
@@ -312,19 +178,22 @@ class Connection {
   [[nodiscard]] bool broken() const noexcept { return broken_; }
   [[nodiscard]] bool valid() const noexcept { return ctx_ != nullptr; }
   [[nodiscard]] int pending() const noexcept { return pending_; }
-  [[nodiscard]] int fd() const noexcept { return ctx_->fd; }
+  [[nodiscard]] int fd() const noexcept;
   [[nodiscard]] const std::string& url() const noexcept { return url_; }
 
   // Ends a blocking read from another thread (a stop request): the socket is
   // shut down, never closed, so the owner's descriptor stays valid until it
   // drops this connection. Thread-safe.
-  void interrupt() const noexcept { ::shutdown(ctx_->fd, SHUT_RDWR); }
+  void interrupt() const noexcept;
   // Marks it broken (in its owner's thread), so it is dropped, not reused.
   void break_off() noexcept { broken_ = true; }
 
  private:
-  Connection(std::unique_ptr<redisContext, ContextDeleter> ctx, std::string url)
-      : ctx_{std::move(ctx)}, url_{std::move(url)} {}
+  struct Context;  // hiredis's redisContext
+  struct Free {
+    void operator()(Context* c) const noexcept;
+  };
+  Connection(std::unique_ptr<Context, Free> ctx, std::string url);
 
   // A RESP header: `kind` (* for an array, $ for a bulk string) and a count.
   void put_length(char kind, std::size_t n) {
@@ -336,17 +205,9 @@ class Connection {
     command_.append(digits, static_cast<std::size_t>(end + 2 - digits));
   }
 
-  Error io_error() const {
-    if (oversized_ != 0)
-      return Error{Errc::too_large, "redis at " + url_ + ": a command with a string of " + std::to_string(oversized_) +
-                                             " bytes, more than the server takes in one piece (its proto-max-bulk-len, " +
-                                             std::to_string(max_bulk_) + " bytes), was not sent; the connection is dropped"};
-    std::string why = ctx_->err ? std::string{ctx_->errstr} : "connection lost";
-    if (ctx_->err == REDIS_ERR_IO && (errno == EAGAIN || errno == EWOULDBLOCK)) why = "no answer in time";
-    return Error{Errc::unreachable, "redis at " + url_ + ": " + why};
-  }
+  Error io_error() const;
 
-  std::unique_ptr<redisContext, ContextDeleter> ctx_;
+  std::unique_ptr<Context, Free> ctx_;
   std::string url_;
   std::chrono::microseconds timeout_{-1};
   std::size_t max_bulk_ = kDefaultMaxBulk;
@@ -419,13 +280,8 @@ class StopGuard {
   std::stop_callback<Wake> callback_;  // last: registered once the rest exists
 };
 
-// What a reply says, for the few shapes the medium reads.
-inline std::string_view text(const redisReply& r) noexcept { return {r.str ? r.str : "", r.str ? r.len : 0}; }
-inline bool is_error(const redisReply& r) noexcept { return r.type == REDIS_REPLY_ERROR; }
-inline bool is_nil(const redisReply& r) noexcept { return r.type == REDIS_REPLY_NIL; }
-
 // A server's error reply as an Error naming what was being done.
-inline Error server_error(const redisReply& r, const std::string& what) {
+inline Error server_error(ReplyRef r, const std::string& what) {
   const auto message = text(r);
   const auto code = message.starts_with("WRONGTYPE") ? Errc::type_mismatch : Errc::unreachable;
   return Error{code, what + ": the server said " + std::string{message}};

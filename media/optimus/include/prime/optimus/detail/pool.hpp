@@ -217,12 +217,13 @@ class Pool : public std::enable_shared_from_this<Pool> {
     const auto sent = std::chrono::system_clock::now();
     auto time = connection.command({"TIME"});
     const auto received = std::chrono::system_clock::now();
-    if (!time || (*time)->type != REDIS_REPLY_ARRAY || (*time)->elements != 2) return;
+    if (!time || !(*time)->is_array() || (*time)->size() != 2) return;
     std::int64_t seconds = 0, micros = 0;
-    const auto number = [](const redisReply* r, std::int64_t& out) {
-      return r->str != nullptr && std::from_chars(r->str, r->str + r->len, out).ec == std::errc{};
+    const auto number = [](ReplyRef r, std::int64_t& out) {
+      const auto t = r.text();
+      return !t.empty() && std::from_chars(t.data(), t.data() + t.size(), out).ec == std::errc{};
     };
-    if (!number((*time)->element[0], seconds) || !number((*time)->element[1], micros)) return;
+    if (!number((**time)[0], seconds) || !number((**time)[1], micros)) return;
     const auto round_trip = received - sent;
     const auto midway = std::chrono::duration_cast<std::chrono::microseconds>((sent + round_trip / 2).time_since_epoch());
     std::scoped_lock lock{clock_mutex_};

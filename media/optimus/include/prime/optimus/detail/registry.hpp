@@ -41,7 +41,7 @@ inline void register_types(Pool& pool, const std::string& registry, const std::s
   auto done = c.command({"HSETNX", registry, name, record});
   if (!done) throw Failure{{done.error().code, what + ": " + done.error().message}};
   if (is_error(**done)) throw Failure{server_error(**done, what + ": writing the registry")};
-  if ((**done).integer == 1) return;
+  if ((**done).integer() == 1) return;
   auto now = c.command({"HGET", registry, name});
   if (!now) throw Failure{{now.error().code, what + ": " + now.error().message}};
   if (!is_error(**now) && !is_nil(**now) && text(**now) != record) throw mismatch(text(**now));

@@ -145,10 +145,10 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
         break;
       }
       refused_backoff = kFirstRefusedBackoff;
-      if (is_nil(**got) || (**got).type != REDIS_REPLY_ARRAY || (**got).elements != 2) continue;
-      if (text(*(**got).element[0]) == wake) continue;  // stopping: the loop's next turn ends it
+      if (is_nil(**got) || !(**got).is_array() || (**got).size() != 2) continue;
+      if (text((**got)[0]) == wake) continue;  // stopping: the loop's next turn ends it
 
-      auto request = decode_request(text(*(**got).element[1]));
+      auto request = decode_request(text((**got)[1]));
       if (!request) {
         report({Errc::type_mismatch, where + ": request key '" + key + "' held " + request.error() + "; dropped"});
         continue;

@@ -1,7 +1,5 @@
 #pragma once
 
-#include <hiredis/hiredis.h>
-
 #include <charconv>
 #include <chrono>
 #include <cstddef>
@@ -124,10 +122,10 @@ inline std::optional<EntryId> entry_id(std::string_view id) {
 inline std::string append_id(std::uint64_t epoch) { return std::to_string(epoch) + "-*"; }
 
 // An epoch from a reply of TIME: the server's time in ms.
-inline std::optional<std::uint64_t> epoch_from_time(const redisReply& time) {
+inline std::optional<std::uint64_t> epoch_from_time(ReplyRef time) {
   std::uint64_t seconds = 0, micros = 0;
-  if (time.type != REDIS_REPLY_ARRAY || time.elements != 2 || !parse_number(text(*time.element[0]), seconds) ||
-      !parse_number(text(*time.element[1]), micros))
+  if (!time.is_array() || time.size() != 2 || !parse_number(text(time[0]), seconds) ||
+      !parse_number(text(time[1]), micros))
     return std::nullopt;
   return seconds * 1000 + micros / 1000;
 }
@@ -151,10 +149,10 @@ inline std::string reader_progress(std::uint64_t seq, std::string_view capacity)
 }
 
 // A field of an entry, from its reply's [field, value, ...] array.
-inline std::optional<std::string_view> entry_field(const redisReply& fields, std::string_view name) {
-  if (fields.type != REDIS_REPLY_ARRAY) return std::nullopt;
-  for (std::size_t i = 0; i + 1 < fields.elements; i += 2)
-    if (text(*fields.element[i]) == name) return text(*fields.element[i + 1]);
+inline std::optional<std::string_view> entry_field(ReplyRef fields, std::string_view name) {
+  if (!fields.is_array()) return std::nullopt;
+  for (std::size_t i = 0; i + 1 < fields.size(); i += 2)
+    if (text(fields[i]) == name) return text(fields[i + 1]);
   return std::nullopt;
 }
 
@@ -162,11 +160,11 @@ inline std::optional<std::string_view> entry_field(const redisReply& fields, std
 // has another shape.
 struct StreamEntry {
   std::string_view id;
-  const redisReply* fields;
+  ReplyRef fields;
 };
-inline std::optional<StreamEntry> stream_entry(const redisReply& entry) {
-  if (entry.type != REDIS_REPLY_ARRAY || entry.elements != 2) return std::nullopt;
-  return StreamEntry{text(*entry.element[0]), entry.element[1]};
+inline std::optional<StreamEntry> stream_entry(ReplyRef entry) {
+  if (!entry.is_array() || entry.size() != 2) return std::nullopt;
+  return StreamEntry{text(entry[0]), entry[1]};
 }
 
 // An entry's fields as Prime's writers write them. Null when t or d is
@@ -181,7 +179,7 @@ struct EntryFields {
     return dropped_for && dropped_for->find("," + std::string{reader_id} + ",") != std::string_view::npos;
   }
 };
-inline std::optional<EntryFields> entry_fields(const redisReply& fields) {
+inline std::optional<EntryFields> entry_fields(ReplyRef fields) {
   EntryFields out;
   const auto t = entry_field(fields, "t");
   const auto d = entry_field(fields, "d");

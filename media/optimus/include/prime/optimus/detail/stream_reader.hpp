@@ -53,8 +53,8 @@ class StreamReader final : public Reader<T>::Impl {
     auto last = c.command({"XREVRANGE", state_->key(), "+", "-", "COUNT", "1"});
     if (!last) throw Failure{state_->named(last.error())};
     if (is_error(**last)) throw Failure{server_error(**last, "source '" + state_->name() + "': subscribing")};
-    if ((**last).type == REDIS_REPLY_ARRAY && (**last).elements == 1) {
-      if (const auto entry = stream_entry(*(**last).element[0])) {
+    if ((**last).is_array() && (**last).size() == 1) {
+      if (const auto entry = stream_entry((**last)[0])) {
         cursor_ = std::string{entry->id};
         if (const auto id = entry_id(entry->id)) last_ = *id;
       }
@@ -147,7 +147,7 @@ class StreamReader final : public Reader<T>::Impl {
       if (!registered) return std::unexpected(state_->named(registered.error()));
       if (is_error(**registered))
         return std::unexpected(server_error(**registered, "source '" + state_->name() + "': registering a block reader"));
-      if (i == 1 && registered_ && (**registered).type == REDIS_REPLY_INTEGER && (**registered).integer == 1)
+      if (i == 1 && registered_ && (**registered).is_integer() && (**registered).integer() == 1)
         state_->report({Errc::overflow, "source '" + state_->name() + "': a block reader read nothing for " +
                                             std::to_string(kReaderLease.count()) +
                                             " ms with its room used up and was taken for gone; registered again, it may have lost values not counted by lost()"});
@@ -206,18 +206,18 @@ class StreamReader final : public Reader<T>::Impl {
       return std::unexpected(state_->named(got.error()));
     }
     if (is_error(**got)) return std::unexpected(server_error(**got, "source '" + state_->name() + "': waiting"));
-    if (is_nil(**got) || (**got).type != REDIS_REPLY_ARRAY || (**got).elements != 1) return {};
-    const auto& stream = *(**got).element[0];
-    if (stream.type == REDIS_REPLY_ARRAY && stream.elements == 2) take(*stream.element[1], false);
+    if (is_nil(**got) || !(**got).is_array() || (**got).size() != 1) return {};
+    const auto stream = (**got)[0];
+    if (stream.is_array() && stream.size() == 2) take(stream[1], false);
     return {};
   }
 
   // Takes a reply's entries (newest first when `reversed`) into the cache.
-  void take(const redisReply& entries, bool reversed) {
-    if (entries.type != REDIS_REPLY_ARRAY) return;
-    const auto n = entries.elements;
+  void take(ReplyRef entries, bool reversed) {
+    if (!entries.is_array()) return;
+    const auto n = entries.size();
     for (std::size_t k = 0; k < n; ++k) {
-      const auto entry = stream_entry(*entries.element[reversed ? n - 1 - k : k]);
+      const auto entry = stream_entry(entries[reversed ? n - 1 - k : k]);
       if (!entry) continue;
       cursor_ = std::string{entry->id};
       if (const auto id = entry_id(entry->id)) {
@@ -228,7 +228,7 @@ class StreamReader final : public Reader<T>::Impl {
         if (id->seq > before + 1) lost_ += id->seq - before - 1;
         last_ = *id;
       }
-      const auto fields = entry_fields(*entry->fields);
+      const auto fields = entry_fields(entry->fields);
       if (!fields) {
         ++lost_;
         state_->report({Errc::type_mismatch, "source '" + state_->name() + "': entry " + std::string{entry->id} + " of '" +

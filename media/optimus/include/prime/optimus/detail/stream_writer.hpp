@@ -357,8 +357,8 @@ class StreamState {
       auto last = c.command({"XREVRANGE", key_, "+", "-", "COUNT", "1"});
       if (!last) return std::unexpected(named(last.error()));
       if (is_error(**last)) return std::unexpected(server_error(**last, "source '" + name_ + "': publishing"));
-      if ((**last).type == REDIS_REPLY_ARRAY && (**last).elements == 1)
-        if (const auto entry = stream_entry(*(**last).element[0]))
+      if ((**last).is_array() && (**last).size() == 1)
+        if (const auto entry = stream_entry((**last)[0]))
           if (const auto id = entry_id(entry->id)) {
             std::scoped_lock lock{mutex_};
             epoch_ = id->epoch;
@@ -418,9 +418,9 @@ class StreamState {
         return std::unexpected(server_error(**r, "source '" + name_ + "': publishing"));
       }
       const auto& reply = **r;
-      if (reply.type != REDIS_REPLY_ARRAY || reply.elements != 2)
+      if (!reply.is_array() || reply.size() != 2)
         return std::unexpected(Error{Errc::type_mismatch, "source '" + name_ + "': an unexpected script reply"});
-      return ScriptResult{reply.element[0]->integer == 1, reply.element[1]->integer};
+      return ScriptResult{reply[0].integer() == 1, reply[1].integer()};
     }
     return std::unexpected(Error{Errc::unreachable, "source '" + name_ + "': the server keeps losing its script"});
   }
