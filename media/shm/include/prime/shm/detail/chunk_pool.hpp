@@ -91,15 +91,28 @@ class ChunkPool {
   }
 
   // A batch's evictions: the chunks still leaving from before, and those
-  // the batch pushes out of the ring (pushed_out, before its head store),
-  // evicted together after its fence (evict_batch).
-  void start_batch() noexcept {
-    batch_count_ = 0;
-    while (const auto old = leaving_.pop()) batch_leaving_[batch_count_++] = *old;
-  }
-  void pushed_out(std::uint32_t old) noexcept {
-    batch_leaving_[batch_count_++] = old;
-    __builtin_prefetch(&places_.chunk(old));  // for evict_batch's look at its holders
+  // the batch pushes out of the ring (push, before its head store),
+  // evicted together after its fence (evict_batch). Kept by the publish in
+  // a local variable: its count and places then stay in registers, not
+  // reloaded after every store the publish makes.
+  class Batch {
+   public:
+    void push(std::uint32_t old) noexcept {
+      chunks_[count_++] = old;
+      __builtin_prefetch(&places_.chunk(old));  // for evict_batch's look at its holders
+    }
+
+   private:
+    friend class ChunkPool;
+    Batch(const Places& places, std::uint32_t* chunks) noexcept : places_{places}, chunks_{chunks} {}
+    Places places_;
+    std::uint32_t* chunks_;
+    std::size_t count_ = 0;
+  };
+  [[nodiscard]] Batch start_batch() noexcept {
+    Batch batch{places_, batch_leaving_.data()};
+    while (const auto old = leaving_.pop()) batch.chunks_[batch.count_++] = *old;
+    return batch;
   }
   // evict(chunk, true) for each: their holders all read first (relaxed),
   // then one acquire fence for the reads, then each chunk kept as a spare
@@ -107,16 +120,16 @@ class ChunkPool {
   // batch's evicted holders at once").
   // ThreadSanitizer does not see fences (GCC says so: -Wtsan), so under it
   // the loads acquire themselves: the same order, one it can check.
-  void evict_batch() noexcept {
+  void evict_batch(const Batch& batch) noexcept {
 #if defined(__SANITIZE_THREAD__)
     constexpr auto kRead = std::memory_order_acquire;
 #else
     constexpr auto kRead = std::memory_order_relaxed;
 #endif
-    const auto places = places_;
-    const auto* const leaving = batch_leaving_.data();
+    const auto places = batch.places_;
+    const auto* const leaving = batch.chunks_;
     auto* const seen = holders_seen_.data();
-    const auto n = batch_count_;
+    const auto n = batch.count_;
     for (std::size_t k = 0; k < n; ++k) seen[k] = places.chunk(leaving[k]).holders.load(kRead);
     std::atomic_thread_fence(std::memory_order_acquire);
     for (std::size_t k = 0; k < n; ++k) {
@@ -127,7 +140,6 @@ class ChunkPool {
         places.chunk(leaving[k]).holders.fetch_and(~kPublisherBit, std::memory_order_acq_rel);
       }
     }
-    batch_count_ = 0;
   }
 
  private:
@@ -224,11 +236,10 @@ class ChunkPool {
   // batch pushes out of the ring").
   Fifo spare_;
   Fifo leaving_;  // out of the ring, not evicted yet (see leave)
-  // A batch's (start_batch, pushed_out), and those leaving from before:
+  // A batch's (Batch), and those leaving from before:
   // room for a batch as large as the ring and kLeavingMax more.
   std::vector<std::uint32_t> batch_leaving_;
   std::vector<std::uint64_t> holders_seen_;  // their holders, as evict_batch read them
-  std::size_t batch_count_ = 0;
 };
 
 }  // namespace prime::shm::detail

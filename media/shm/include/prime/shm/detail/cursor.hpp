@@ -170,8 +170,8 @@ class Cursor {
     retire_ended();
     const auto places = topic_->places();
     const auto first = out.size();
-    look_ahead(places, max, true, [&](std::uint32_t chunk, const TakenInfo& info) {
-      out.push_back({chunk, next_ + (out.size() - first), info});
+    look_ahead(places, max, true, [&, from = next_](std::uint32_t chunk, const TakenInfo& info) {
+      out.push_back({chunk, from + (out.size() - first), info});
     });
     const auto held =
         hold_in_order(places, bit_, next_, out.size() - first, [&](std::size_t i) { return out[first + i].chunk; });
@@ -319,8 +319,9 @@ class Cursor {
   // first that is not; what the look at next_ found.
   template <class Found>
   Look::Is look_ahead(const Places& places, std::size_t max, bool for_hold, Found&& found) noexcept {
+    const auto from = next_;  // local: `found` stores what could alias the member
     for (std::size_t i = 0; i < max; ++i) {
-      const auto seen = look(places, next_ + i, for_hold);
+      const auto seen = look(places, from + i, for_hold);
       if (seen.is != Look::Is::out) return i == 0 ? seen.is : Look::Is::out;
       found(seen.chunk, seen.info);
     }

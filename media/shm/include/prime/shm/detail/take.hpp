@@ -63,18 +63,18 @@ struct Look {
   TakenInfo info{};
 };
 
-// Step 1. The chunk's payload is asked for as it is found, and its header
-// line too, for writing, when `for_hold` (a hold follows).
+// Step 1. The chunk's header line is asked for, for writing, when
+// `for_hold` (a hold follows), and its payload once the sample is found.
 inline Look look(const Places& places, std::uint64_t seq, bool for_hold) noexcept {
   const auto entry = places.ring(seq).load(std::memory_order_acquire);
   const auto ahead = RingEntry::ahead(entry, seq);
   if (ahead < 0) return {Look::Is::not_yet};
   if (ahead > 0 || !places.names_chunk(entry)) return {Look::Is::gone};
   const auto chunk = RingEntry::chunk(entry);
-  __builtin_prefetch(places.payload(chunk));
   if (for_hold) prefetch_for_write(&places.chunk(chunk));
   const auto info = info_of(places, seq);
   if (!info) return {Look::Is::gone};
+  __builtin_prefetch(places.payload(chunk));
   return {Look::Is::out, chunk, *info};
 }
 

@@ -178,17 +178,17 @@ class Writer {
       places.ring(first + i).store(RingEntry::pack(first + i, chunks[i]), std::memory_order_release);
     // The chunks these entries push out of the ring, and those still leaving
     // from before: evicted after the head.
-    pool_.start_batch();
+    auto leaving = pool_.start_batch();
     for (std::size_t i = 0; i < chunks.size(); ++i)
       if (const auto old = std::exchange(in_ring_[places.ring_index(first + i)], chunks[i]); old != kNoChunk)
-        pool_.pushed_out(old);
+        leaving.push(old);
     next_ = first + chunks.size();
     const bool full = fences_fully();
     store_head(next_, full);
     // One fence for the batch's evictions (ChunkPool::evict), not a
     // read-modify-write per sample.
     fence_after_head(full);
-    pool_.evict_batch();
+    pool_.evict_batch(leaving);
     wake_subscribers();
     claim_ahead();
   }
