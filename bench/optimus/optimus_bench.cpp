@@ -36,6 +36,7 @@
 
 #include "optimus/support/redis_server.hpp"
 #include "prime/optimus.hpp"
+#include "prime/optimus/detail/connection.hpp"  // a bare client: the floor Optimus is measured against
 
 namespace {
 

@@ -15,6 +15,9 @@
 
 #include "optimus/support/optimus_fixture.hpp"
 #include "prime/liberty.hpp"
+#include "prime/optimus/detail/envelope.hpp"
+#include "prime/optimus/detail/keys.hpp"
+#include "prime/optimus/detail/pool.hpp"
 #include "support/failure.hpp"
 
 namespace prime::test {

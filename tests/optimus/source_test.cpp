@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "optimus/support/optimus_fixture.hpp"
+#include "prime/optimus/detail/stream_protocol.hpp"
 #include "support/failure.hpp"
 
 namespace prime::test {

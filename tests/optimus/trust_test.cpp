@@ -10,6 +10,8 @@
 
 #include "optimus/support/optimus_fixture.hpp"
 #include "prime/optimus.hpp"
+#include "prime/optimus/detail/envelope.hpp"
+#include "prime/optimus/detail/keys.hpp"
 #include "support/failure.hpp"
 
 namespace prime::test {

@@ -18,6 +18,7 @@
 #include "json.hpp"
 #include "optimus/support/redis_server.hpp"
 #include "prime/optimus.hpp"
+#include "prime/optimus/detail/connection.hpp"
 #include "prime/shm.hpp"
 #include "prime/shm/detail/service_layout.hpp"
 #include "shm/domain.hpp"

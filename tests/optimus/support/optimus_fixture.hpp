@@ -10,6 +10,7 @@
 
 #include "optimus/support/redis_server.hpp"
 #include "prime/optimus.hpp"
+#include "prime/optimus/detail/connection.hpp"  // a raw connection, to look at and tamper with the server
 
 namespace prime::test {
 

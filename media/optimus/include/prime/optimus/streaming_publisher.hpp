@@ -9,15 +9,15 @@
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
 #include "prime/optimus/codec.hpp"
-#include "prime/optimus/detail/stream_writer.hpp"
+#include "prime/optimus/stream.hpp"
 
 namespace prime::optimus {
 
 namespace detail {
 // A batch's values encoded, each with its stamp, as a stream's writer sends them.
 template <class T>
-std::vector<StreamState::Message> encoded(std::span<const Sample<T>> samples) {
-  std::vector<StreamState::Message> batch;
+std::vector<Message> encoded(std::span<const Sample<T>> samples) {
+  std::vector<Message> batch;
   batch.reserve(samples.size());
   for (const auto& s : samples) batch.emplace_back(encode_message(s.value), s.stamp);
   return batch;
@@ -45,25 +45,16 @@ std::vector<StreamState::Message> encoded(std::span<const Sample<T>> samples) {
 template <class T>
 class StreamingPublisher {
  public:
-  explicit StreamingPublisher(std::shared_ptr<detail::StreamState> state) : state_{std::move(state)} {}
-  StreamingPublisher(StreamingPublisher&&) noexcept = default;
-  StreamingPublisher& operator=(StreamingPublisher&&) = delete;
-  StreamingPublisher(const StreamingPublisher&) = delete;
-  StreamingPublisher& operator=(const StreamingPublisher&) = delete;
-  ~StreamingPublisher() {
-    if (!state_) return;  // moved from
-    if (auto done = flush(); !done) state_->report(std::move(done.error()));
-  }
+  explicit StreamingPublisher(detail::Stream stream) : batches_{std::move(stream)} {}
 
   std::expected<void, Error> publish_all(std::span<const Sample<T>> samples) {
-    return state_->stream(in_flight_, detail::encoded(samples));
+    return batches_.publish_all(detail::encoded(samples));
   }
 
-  std::expected<void, Error> flush() { return state_->settle(in_flight_); }
+  std::expected<void, Error> flush() { return batches_.flush(); }
 
  private:
-  std::shared_ptr<detail::StreamState> state_;
-  detail::StreamState::InFlight in_flight_;
+  detail::BatchStream batches_;
 };
 
 }  // namespace prime::optimus

@@ -12,9 +12,8 @@
 #include <utility>
 #include <vector>
 
-#include "prime/logic/block.hpp"
 #include "prime/logic/error.hpp"
-#include "prime/optimus/codec.hpp"
+#include "prime/optimus/core.hpp"
 #include "prime/optimus/detail/connection.hpp"
 #include "prime/optimus/detail/envelope.hpp"
 #include "prime/optimus/detail/keys.hpp"
@@ -22,24 +21,6 @@
 #include "prime/topology/detail/runtime_state.hpp"
 
 namespace prime::optimus::detail {
-
-// Runs a block on an encoded input: the encoded output, or the error to send
-// back. An exception from the block becomes an error; a prime::Failure keeps
-// its code and message.
-template <class In, class F>
-std::expected<std::string, Error> run_block(const F& block, std::string_view payload, const std::string& where) {
-  auto in = decode_message<In>(payload, where + ", request");
-  if (!in) return std::unexpected(std::move(in.error()));
-  try {
-    return encode_message(std::invoke(block, std::move(*in)));
-  } catch (const Failure& f) {
-    return std::unexpected(f.error());
-  } catch (const std::exception& e) {
-    return std::unexpected(Error{Errc::block_failed, where + ": " + e.what()});
-  } catch (...) {
-    return std::unexpected(Error{Errc::block_failed, where + ": an exception of unknown type"});
-  }
-}
 
 // Hands a linked call's request on to the next service (KEYS[1], its
 // request key) if a worker of it lives (KEYS[2], its alive key); else
@@ -78,9 +59,8 @@ inline std::optional<std::string> foreign_key(std::string_view domain, const Req
 // that names a key the worker must not write (foreign_key) is dropped and
 // reported. What it sends is pipelined with its next wait, so a busy worker
 // makes one round trip per request.
-template <class In, class F>
-void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, const std::string& key,
-                    const F& block, const std::weak_ptr<prime::detail::RuntimeState>& runtime, std::stop_token stop) {
+inline void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, const std::string& key,
+                           const Handler& handler, const std::weak_ptr<prime::detail::RuntimeState>& runtime, std::stop_token stop) {
   const std::string where = "service '" + name + "'";
   const std::string wait = seconds_text(kWaitSlice);
   const auto report = [&](Error error) {
@@ -160,7 +140,7 @@ void serve_requests(const std::shared_ptr<Pool>& pool, const std::string& name, 
       if (request->deadline_ms != 0 &&
           pool->server_ms() > request->deadline_ms)
         continue;  // its caller has given up: running it would answer nobody
-      auto result = run_block<In>(block, request->payload, where);
+      auto result = handler(request->payload);
       if (result)  // before it is wrapped: an envelope gives it a 32-bit length (kMaxEnvelope)
         if (auto fits = connection.fits(result->size(), [&] { return where + ": its output"; }); !fits)
           result = std::unexpected(std::move(fits.error()));

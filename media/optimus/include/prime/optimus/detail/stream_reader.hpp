@@ -14,14 +14,13 @@
 #include <utility>
 
 #include "prime/logic/error.hpp"
-#include "prime/logic/reader.hpp"
 #include "prime/logic/sample.hpp"
-#include "prime/optimus/codec.hpp"
 #include "prime/optimus/detail/connection.hpp"
 #include "prime/optimus/detail/keys.hpp"
 #include "prime/optimus/detail/pool.hpp"
 #include "prime/optimus/detail/stream_protocol.hpp"
 #include "prime/optimus/detail/stream_writer.hpp"
+#include "prime/optimus/stream.hpp"
 #include "prime/topology/qos.hpp"
 
 // The reading side of a source's stream.
@@ -32,11 +31,11 @@ namespace prime::optimus::detail {
 // batches (one round trip for up to `capacity` values). Under drop_oldest a
 // batch is the newest `capacity` unread values, and what was skipped or
 // trimmed away is counted from the gaps in the sequence numbers; under block
-// the reader registers its cursor so writers wait for it.
+// the reader registers its cursor so writers wait for it. Its messages stay
+// encoded: the typed reader (source.hpp) decodes them.
 //
 // Not thread-safe (one thread at a time, as every Reader).
-template <class T>
-class StreamReader final : public Reader<T>::Impl {
+class StreamReader {
  public:
   StreamReader(std::shared_ptr<StreamState> state, const Qos& qos)
       : state_{std::move(state)}, qos_{qos}, block_{qos.overflow == Overflow::block} {
@@ -68,7 +67,7 @@ class StreamReader final : public Reader<T>::Impl {
   StreamReader(const StreamReader&) = delete;
   StreamReader& operator=(const StreamReader&) = delete;
 
-  ~StreamReader() override {
+  ~StreamReader() {
     if (!block_) return;
     if (auto lease = state_->pool().acquire()) {
       (*lease)->set_timeout(state_->command_timeout());
@@ -77,14 +76,14 @@ class StreamReader final : public Reader<T>::Impl {
     }
   }
 
-  std::optional<Sample<T>> try_read() override {
+  std::optional<Message> try_read() {
     if (cache_.empty()) {
       if (auto fetched = fetch(); !fetched) state_->report(fetched.error());
     }
     return pop();
   }
 
-  std::expected<Sample<T>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
+  std::expected<Message, Error> read_until(Clock::time_point deadline, std::stop_token stop) {
     while (true) {
       if (auto value = pop()) return std::move(*value);
       if (stop.stop_requested()) return std::unexpected(stopped());
@@ -106,7 +105,7 @@ class StreamReader final : public Reader<T>::Impl {
     }
   }
 
-  [[nodiscard]] std::uint64_t lost() const override {
+  [[nodiscard]] std::uint64_t lost() const {
     std::uint64_t dropped = 0;
     if (block_) {
       if (auto lease = state_->pool().acquire()) {
@@ -118,8 +117,14 @@ class StreamReader final : public Reader<T>::Impl {
     return lost_ + dropped;
   }
 
+  // A message that did not decode: counted as lost, and said.
+  void refuse(Error why) {
+    ++lost_;
+    state_->report(std::move(why));
+  }
+
  private:
-  std::optional<Sample<T>> pop() {
+  std::optional<Message> pop() {
     if (cache_.empty()) return std::nullopt;
     auto sample = std::move(cache_.front());
     cache_.pop_front();
@@ -237,13 +242,7 @@ class StreamReader final : public Reader<T>::Impl {
       }
       if (block_ && fields->dropped_for_reader(reader_id_))
         continue;  // dropped for this reader by a writer it kept waiting; counted by the writer
-      auto value = decode_message<T>(fields->message, "source '" + state_->name() + "', key '" + state_->key() + "'");
-      if (!value) {
-        ++lost_;
-        state_->report(value.error());
-        continue;
-      }
-      cache_.push_back(Sample<T>{std::move(*value), Clock::time_point{std::chrono::nanoseconds{fields->stamp_ns}}});
+      cache_.emplace_back(std::string{fields->message}, Clock::time_point{std::chrono::nanoseconds{fields->stamp_ns}});
     }
   }
 
@@ -259,7 +258,7 @@ class StreamReader final : public Reader<T>::Impl {
   bool registered_ = false;  // a `block` reader, once it has registered
   EntryId last_;  // of the last entry read (or the newest when subscribing)
   std::uint64_t lost_ = 0;
-  std::deque<Sample<T>> cache_;
+  std::deque<Message> cache_;
 };
 
 }  // namespace prime::optimus::detail

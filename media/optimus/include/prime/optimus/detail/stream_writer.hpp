@@ -22,6 +22,7 @@
 #include "prime/optimus/detail/keys.hpp"
 #include "prime/optimus/detail/pool.hpp"
 #include "prime/optimus/detail/stream_protocol.hpp"
+#include "prime/optimus/stream.hpp"
 #include "prime/topology/detail/runtime_state.hpp"
 #include "prime/topology/qos.hpp"
 
@@ -31,6 +32,15 @@
 // (stream_reader.hpp) holds it to keep its source, and what feeds it, alive.
 
 namespace prime::optimus::detail {
+
+// A batch of a StreamingPublisher sent and not yet answered: the connection
+// it went on (kept from batch to batch), its messages (sent again if
+// refused) and the epoch it appends in.
+struct InFlight {
+  std::optional<Pool::Lease> lease;
+  std::vector<Message> batch;
+  std::uint64_t epoch = 0;
+};
 
 // What a source's handles, its readers and the listener that feeds it from an
 // event share: where its stream is, its QoS, the core it reports to.
@@ -102,9 +112,6 @@ class StreamState {
     }
   }
 
-  // An encoded value and its stamp.
-  using Message = std::pair<std::string, Clock::time_point>;
-
   // Appends many encoded messages in one round trip (drop_oldest semantics:
   // a batch never waits for readers): one XADD each, in the stream's epoch,
   // numbered by the server, then one XTRIM, pipelined. No script: the
@@ -121,15 +128,6 @@ class StreamState {
     c.set_timeout(command_timeout());
     return append_all(c, messages);
   }
-
-  // A batch of a StreamingPublisher sent and not yet answered: the
-  // connection it went on (kept from batch to batch), its messages (sent
-  // again if refused) and the epoch it appends in.
-  struct InFlight {
-    std::optional<Pool::Lease> lease;
-    std::vector<Message> batch;
-    std::uint64_t epoch = 0;
-  };
 
   // Sends `batch` after the one in flight, then reads that one's replies: the
   // server appends one batch while the caller encodes and sends the next.
