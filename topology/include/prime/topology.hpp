@@ -14,6 +14,7 @@
 #include "prime/topology/interpolate.hpp"
 #include "prime/topology/link.hpp"
 #include "prime/topology/local_source.hpp"
+#include "prime/topology/loop.hpp"
 #include "prime/topology/qos.hpp"
 #include "prime/topology/repeat.hpp"
 #include "prime/topology/runtime.hpp"

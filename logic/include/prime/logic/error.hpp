@@ -35,6 +35,7 @@ enum class Errc {
   rate_limited = 20,          // a client asked again sooner than its service lets one (min_interval)
   held_limit = 21,            // a reader holds as many values as it may (max_held) until one is released
   iteration_limit = 22,       // a loop ran its maximum of iterations or attempts without its condition met
+  overrun = 23,               // a periodic loop's tick ended after its deadline
 };
 
 constexpr std::string_view to_string(Errc code) noexcept {
@@ -61,6 +62,7 @@ constexpr std::string_view to_string(Errc code) noexcept {
     case Errc::rate_limited: return "rate limited";
     case Errc::held_limit: return "held limit";
     case Errc::iteration_limit: return "iteration limit";
+    case Errc::overrun: return "overrun";
   }
   return "unknown";
 }
