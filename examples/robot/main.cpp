@@ -12,8 +12,10 @@
 // with SIGKILL and restarts it: the driver holds the robot safe meanwhile,
 // and the system recovers.
 //
-//   robot [seconds]        (default 12; Ctrl-C stops it early)
-//   robot sensors|planner|driver <domain>    one process, as the launcher starts it
+//   robot [seconds] [--event]   (default 12 s; Ctrl-C stops it early). The planner runs
+//                               its chain in a 50 Hz loop on the newest synchronised pair,
+//                               or with --event on each pair as soon as it is made.
+//   robot sensors|planner|driver <domain> [--event]   one process, as the launcher starts it
 //
 // While it runs, another terminal sees it: `prime ls`, `prime hz sensors/lidar`,
 // `prime echo driver/stats`, `prime graph`.
@@ -44,9 +46,12 @@ using namespace std::chrono_literals;
 
 std::atomic<bool> stop{false};
 
+robot::Trigger trigger = robot::Trigger::periodic;
+
 pid_t start(const std::string& role, const std::string& domain) {
   std::string self = "/proc/self/exe";
   std::vector<std::string> args{"robot", role, domain};
+  if (role == "planner" && trigger == robot::Trigger::event) args.push_back("--event");
   std::vector<char*> argv;
   for (auto& a : args) argv.push_back(a.data());
   argv.push_back(nullptr);
@@ -76,8 +81,9 @@ struct Phase {
 int launch(int seconds) {
   const char* env = std::getenv("PRIME_DOMAIN");
   const std::string domain = env && *env ? env : "robot";
-  std::printf("[robot] domain '%s': sensors, planner and driver start; %d s; the planner is killed at %d s\n", domain.c_str(),
-              seconds, seconds / 3);
+  std::printf("[robot] domain '%s': sensors, planner (%s) and driver start; %d s; the planner is killed at %d s\n",
+              domain.c_str(), trigger == robot::Trigger::event ? "on each synchronised pair" : "50 Hz loop", seconds,
+              seconds / 3);
   std::fflush(stdout);
   prime::shm::Core shm{domain, {.participant = "launcher"}};
   auto stats = shm.subscribe<robot::DriverStats>("driver/stats", {.spin = 0us}, {.capacity = 8}).subscribe();
@@ -133,20 +139,25 @@ int main(int argc, char** argv) {
   on_stop.sa_handler = [](int) { stop = true; };
   sigaction(SIGINT, &on_stop, nullptr);
   sigaction(SIGTERM, &on_stop, nullptr);
-  if (argc == 3) {
-    const std::string role = argv[1];
+  std::vector<std::string> args(argv + 1, argv + argc);
+  if (!args.empty() && args.back() == "--event") {
+    trigger = robot::Trigger::event;
+    args.pop_back();
+  }
+  if (args.size() == 2) {
+    const std::string& role = args[0];
     try {
-      if (role == "sensors") return robot::sensors(argv[2], stop);
-      if (role == "planner") return robot::planner(argv[2], stop);
-      if (role == "driver") return robot::driver(argv[2], stop);
+      if (role == "sensors") return robot::sensors(args[1], stop);
+      if (role == "planner") return robot::planner(args[1], trigger, stop);
+      if (role == "driver") return robot::driver(args[1], stop);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "[%s] %s\n", role.c_str(), e.what());
       return 1;
     }
   }
-  if (argc > 2) {
-    std::fprintf(stderr, "usage: robot [seconds]\n");
+  if (args.size() > 1) {
+    std::fprintf(stderr, "usage: robot [seconds] [--event]\n");
     return 2;
   }
-  return launch(argc == 2 ? std::atoi(argv[1]) : 12);
+  return launch(args.size() == 1 ? std::atoi(args[0].c_str()) : 12);
 }

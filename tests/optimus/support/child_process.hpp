@@ -60,7 +60,9 @@ class ChildProcess {
     for (auto& a : argv) args.push_back(a.data());
     args.push_back(nullptr);
     // fork + exec rather than posix_spawn, for PR_SET_PDEATHSIG. Between fork
-    // and exec only async-signal-safe calls.
+    // and exec only async-signal-safe calls. The death signal comes when the
+    // *thread* that forked ends, not the process: start a child on a thread
+    // that outlives it.
     const int err_fd = stderr_path.empty() ? -1 : ::open(stderr_path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
     const pid_t parent = ::getpid();
     pid_ = ::fork();

@@ -27,6 +27,8 @@ namespace prime::test {
 // port and a Unix socket in a fresh directory, persistence off (--save ""
 // --appendonly no), stopped and cleaned up when the object goes. It can be
 // stopped and started again on the same port, to test what a restart does.
+// The server is killed when the thread that made (or restarted) it ends
+// (ChildProcess): make it on a thread that outlives its use.
 class RedisServer {
  public:
   struct Config {
