@@ -42,9 +42,13 @@ TEST(LoopHistogram, SmallDurationsAreExactAndLargeOnesWithinASixteenth) {
   for (std::uint64_t ns : {0ull, 1ull, 15ull, 16ull, 17ull, 1000ull, 123'456ull, 20'000'000ull, 1ull << 40}) {
     const auto i = DurationHistogram::index(ns);
     EXPECT_GE(DurationHistogram::upper(i), ns) << ns;
-    if (ns < 32) EXPECT_EQ(DurationHistogram::upper(i), ns) << "under 32 ns each bucket holds one value";
+    if (ns < 32) {
+      EXPECT_EQ(DurationHistogram::upper(i), ns) << "under 32 ns each bucket holds one value";
+    }
     EXPECT_LE(DurationHistogram::upper(i) - ns, ns / 16) << ns;
-    if (i > 0) EXPECT_LT(DurationHistogram::upper(i - 1), ns) << "buckets do not overlap, at " << ns;
+    if (i > 0) {
+      EXPECT_LT(DurationHistogram::upper(i - 1), ns) << "buckets do not overlap, at " << ns;
+    }
   }
   EXPECT_EQ(DurationHistogram::index(~0ull), DurationHistogram::kBuckets - 1);
 }

@@ -16,6 +16,7 @@
 #include "prime/topology/local_source.hpp"
 #include "prime/topology/loop.hpp"
 #include "prime/topology/qos.hpp"
+#include "prime/topology/realtime.hpp"
 #include "prime/topology/repeat.hpp"
 #include "prime/topology/runtime.hpp"
 #include "prime/topology/sync.hpp"

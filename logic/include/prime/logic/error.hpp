@@ -36,6 +36,7 @@ enum class Errc {
   held_limit = 21,            // a reader holds as many values as it may (max_held) until one is released
   iteration_limit = 22,       // a loop ran its maximum of iterations or attempts without its condition met
   overrun = 23,               // a periodic loop's tick ended after its deadline
+  refused = 24,               // the system refused a privilege asked for (a real-time priority, CPUs, locked memory)
 };
 
 constexpr std::string_view to_string(Errc code) noexcept {
@@ -63,6 +64,7 @@ constexpr std::string_view to_string(Errc code) noexcept {
     case Errc::held_limit: return "held limit";
     case Errc::iteration_limit: return "iteration limit";
     case Errc::overrun: return "overrun";
+    case Errc::refused: return "refused";
   }
   return "unknown";
 }

@@ -26,6 +26,7 @@
 #include "prime/topology/concepts.hpp"
 #include "prime/topology/detail/histogram.hpp"
 #include "prime/topology/detail/runtime_state.hpp"
+#include "prime/topology/realtime.hpp"
 
 namespace prime {
 
@@ -45,6 +46,8 @@ struct LoopOptions {
   // reported on the core's errors. The period when not given.
   std::optional<Clock::duration> deadline{};
   Missed missed = Missed::skip;
+  // The loop's thread's scheduling: policy and priority, CPUs (realtime.hpp).
+  Realtime realtime{};
 };
 
 // The spread of a loop's durations since it started: each within 6.25 %
@@ -129,6 +132,8 @@ struct LoopState {
   std::atomic<bool> stopping{false};
   std::mutex mutex;
   std::condition_variable done_cv;
+  bool set_up = false;              // the worker applied its scheduling (or gave up)
+  std::optional<Error> refused{};   // what the system refused, when the loop does not run without it
   bool done = false;
   std::thread::id thread{};
 };
@@ -246,8 +251,14 @@ class Loop {
 //                               {.name = "planner", .deadline = 15ms});
 //   planner.stats().lateness.p99;
 //
+// With `options.realtime`, the loop's thread gets its policy, priority and
+// CPUs before the first tick; what the system refuses throws Errc::refused,
+// naming the limit and how to raise it (or, with best_effort, is one
+// warning on core.errors()).
+//
 // Throws Errc::invalid_argument for a period or deadline that is not
-// positive, or a negative phase; Errc::stopped when the core is stopping.
+// positive, a negative phase, a priority out of range; Errc::stopped when
+// the core is stopping.
 template <Medium M, class C>
   requires std::invocable<C&, Token>
 [[nodiscard]] Loop every(M& core, Clock::duration period, C chain, LoopOptions options = {}) {
@@ -258,20 +269,39 @@ template <Medium M, class C>
   if (period <= Clock::duration::zero()) throw refuse("the period must be positive");
   if (deadline <= Clock::duration::zero()) throw refuse("the deadline must be positive");
   if (options.phase < Clock::duration::zero()) throw refuse("the phase must not be negative");
+  if (auto invalid = detail::realtime_invalid(options.realtime)) throw refuse(*invalid);
   auto runtime = core.runtime().lock();
   if (!runtime) throw Failure{{Errc::stopped, "loop '" + options.name + "': the core is gone"}};
   auto state = std::make_shared<detail::LoopState>(
       options.name, detail::Schedule{Clock::now() + options.phase, period, deadline}, options.missed);
-  runtime->spawn([state, chain = std::move(chain), weak = core.runtime()](std::stop_token stop) mutable {
+  runtime->spawn([state, chain = std::move(chain), weak = core.runtime(),
+                  realtime = options.realtime](std::stop_token stop) mutable {
+    auto refused = detail::apply_realtime(realtime, "loop '" + state->name + "'");
+    if (refused && realtime.best_effort) {
+      refused->message += "; best effort: the loop runs without it";
+      if (auto r = weak.lock()) r->report(*refused);
+      refused.reset();
+    }
     {
       std::scoped_lock lock{state->mutex};
       state->thread = std::this_thread::get_id();
+      state->set_up = true;
+      state->refused = refused;
+      if (refused) state->done = true;
     }
+    state->done_cv.notify_all();
+    if (refused) return;
     detail::run_loop(*state, chain, weak, stop);
     std::scoped_lock lock{state->mutex};
     state->done = true;
     state->done_cv.notify_all();
   });
+  {
+    // The loop runs as asked, or not at all: wait for its scheduling.
+    std::unique_lock lock{state->mutex};
+    state->done_cv.wait(lock, [&] { return state->set_up; });
+    if (state->refused) throw Failure{*state->refused};
+  }
   return Loop{std::move(state)};
 }
 
