@@ -23,6 +23,14 @@ TEST(LoopSchedule, TickTimesAreTheStartPlusWholePeriods) {
   EXPECT_EQ(s.at(3'600'000), kStart + 20ms * 3'600'000) << "an hour and more at 1 kHz: exact, no drift";
 }
 
+TEST(LoopSchedule, TheFirstTickIsTheFirstMultipleOfThePeriodPlusThePhaseStillAhead) {
+  const Clock::time_point now{1'000'000'007ns};
+  EXPECT_EQ(Schedule::aligned(now, 10ns, 0ns, 10ns).start, Clock::time_point{1'000'000'010ns});
+  EXPECT_EQ(Schedule::aligned(now, 10ns, 3ns, 10ns).start, Clock::time_point{1'000'000'013ns});
+  EXPECT_EQ(Schedule::aligned(now, 10ns, 7ns, 10ns).start, now) << "a tick due now is not skipped";
+  EXPECT_EQ(Schedule::aligned(now, 10ns, 8ns, 10ns).start, Clock::time_point{1'000'000'008ns});
+}
+
 TEST(LoopSchedule, ARunThatEndsInTimeIsFollowedByTheNextTick) {
   const Schedule s{kStart, 20ms, 20ms};
   EXPECT_EQ(s.next(0, kStart + 5ms, Missed::skip), 1u);

@@ -210,12 +210,15 @@ TYPED_TEST(LoopTest, StoppingTheLoopOrItsCoreEndsItsRuns) {
   EXPECT_TRUE(fails_with([&] { (void)every(*this->core, 2ms, [](Token) {}); }, Errc::stopped, "no new worker"));
 }
 
-TYPED_TEST(LoopTest, APhaseDelaysTheFirstTick) {
-  Runs runs{1};
-  const auto made = Clock::now();
-  auto loop = every(*this->core, 5ms, [&](Token) { runs.run(); }, {.name = "phased", .phase = 30ms});
-  ASSERT_TRUE(runs.wait_for(1));
-  EXPECT_GE(runs.all().front().began, made + 30ms);
+TYPED_TEST(LoopTest, TicksFallOnTheClocksMultiplesOfThePeriodShiftedByThePhase) {
+  constexpr auto period = 10ms;
+  Runs on_grid{2}, shifted{2};
+  auto first = every(*this->core, period, [&](Token) { on_grid.run(); }, {.name = "first"});
+  ASSERT_TRUE(on_grid.wait_for(1));
+  auto second = every(*this->core, period, [&](Token) { shifted.run(); }, {.name = "second", .phase = 3ms});
+  ASSERT_TRUE(on_grid.wait_for(2) && shifted.wait_for(2));
+  for (const auto& r : on_grid.all()) EXPECT_EQ(r.tick.time.time_since_epoch() % period, 0ms);
+  for (const auto& r : shifted.all()) EXPECT_EQ(r.tick.time.time_since_epoch() % period, 3ms) << "started later, in phase";
 }
 
 TYPED_TEST(LoopTest, OptionsItCannotTakeAreRefusedNamingTheLoop) {
@@ -225,7 +228,9 @@ TYPED_TEST(LoopTest, OptionsItCannotTakeAreRefusedNamingTheLoop) {
   EXPECT_TRUE(fails_with([&] { (void)every(*this->core, 1ms, nothing, {.name = "d", .deadline = -1ms}); },
                          Errc::invalid_argument, "the deadline must be positive"));
   EXPECT_TRUE(fails_with([&] { (void)every(*this->core, 1ms, nothing, {.name = "p", .phase = -1ms}); },
-                         Errc::invalid_argument, "the phase must not be negative"));
+                         Errc::invalid_argument, "the phase must be at least 0 and less than the period"));
+  EXPECT_TRUE(fails_with([&] { (void)every(*this->core, 5ms, nothing, {.name = "p", .phase = 5ms}); },
+                         Errc::invalid_argument, "less than the period"));
   EXPECT_FALSE(this_tick()) << "outside a loop's chain there is no tick";
 }
 

@@ -39,8 +39,10 @@ enum class Missed {
 // How a periodic loop runs: `every(core, period, chain, {.name = "planner", .deadline = 15ms})`.
 struct LoopOptions {
   std::string name = "loop";
-  // The first tick comes this long after the loop starts; ticks then come
-  // every period after it, on the monotonic clock.
+  // Ticks fall on the monotonic clock's multiples of the period, this much
+  // later: loops of one period keep a fixed phase to each other, however
+  // far apart they were started. The first tick is the first of those
+  // still ahead.
   Clock::duration phase{};
   // A tick's run must end within this of its time, or it is an overrun,
   // reported on the core's errors. The period when not given.
@@ -68,7 +70,7 @@ struct LoopStats {
 
 // The tick a periodic loop is running, as its chain sees it (this_tick()).
 struct Tick {
-  std::uint64_t cycle = 0;        // 0 for the first tick: its time is start + phase + cycle * period
+  std::uint64_t cycle = 0;        // 0 for the first tick; cycle k is due k periods after it
   Clock::time_point time{};       // when it was due
   Clock::time_point deadline{};   // when its run must have ended
 };
@@ -105,6 +107,15 @@ struct Schedule {
   Clock::time_point start;  // tick 0's time
   Clock::duration period;
   Clock::duration deadline;
+
+  // Ticks at the clock's multiples of `period` plus `phase`, the first of
+  // them at or after `now`.
+  static Schedule aligned(Clock::time_point now, Clock::duration period, Clock::duration phase,
+                          Clock::duration deadline) noexcept {
+    auto first = Clock::time_point{(now.time_since_epoch() - phase) / period * period} + phase;
+    if (first < now) first += period;
+    return {first, period, deadline};
+  }
 
   [[nodiscard]] Clock::time_point at(std::uint64_t cycle) const noexcept {
     return start + period * static_cast<Clock::rep>(cycle);
@@ -257,7 +268,7 @@ class Loop {
 // warning on core.errors()).
 //
 // Throws Errc::invalid_argument for a period or deadline that is not
-// positive, a negative phase, a priority out of range; Errc::stopped when
+// positive, a phase not within the period, a priority out of range; Errc::stopped when
 // the core is stopping.
 template <Medium M, class C>
   requires std::invocable<C&, Token>
@@ -268,12 +279,13 @@ template <Medium M, class C>
   };
   if (period <= Clock::duration::zero()) throw refuse("the period must be positive");
   if (deadline <= Clock::duration::zero()) throw refuse("the deadline must be positive");
-  if (options.phase < Clock::duration::zero()) throw refuse("the phase must not be negative");
+  if (options.phase < Clock::duration::zero() || options.phase >= period)
+    throw refuse("the phase must be at least 0 and less than the period");
   if (auto invalid = detail::realtime_invalid(options.realtime)) throw refuse(*invalid);
   auto runtime = core.runtime().lock();
   if (!runtime) throw Failure{{Errc::stopped, "loop '" + options.name + "': the core is gone"}};
   auto state = std::make_shared<detail::LoopState>(
-      options.name, detail::Schedule{Clock::now() + options.phase, period, deadline}, options.missed);
+      options.name, detail::Schedule::aligned(Clock::now(), period, options.phase, deadline), options.missed);
   runtime->spawn([state, chain = std::move(chain), weak = core.runtime(),
                   realtime = options.realtime](std::stop_token stop) mutable {
     auto refused = detail::apply_realtime(realtime, "loop '" + state->name + "'");
