@@ -24,7 +24,7 @@ void Stream::report(Error error) const { state_->report(std::move(error)); }
 void Stream::feed_from(prime::Connection upstream) const { state_->feed_from(std::move(upstream)); }
 
 StreamCursor::StreamCursor(const Stream& stream, const Qos& qos)
-    : stream_{stream}, reader_{std::make_unique<StreamReader>(stream.state(), qos)} {}
+    : reader_{std::make_unique<StreamReader>(stream.state(), qos)} {}
 StreamCursor::StreamCursor(StreamCursor&&) noexcept = default;
 StreamCursor::~StreamCursor() = default;
 

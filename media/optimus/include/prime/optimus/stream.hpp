@@ -80,8 +80,7 @@ class StreamCursor {
   void refuse(Error why);
 
  private:
-  Stream stream_;
-  std::unique_ptr<StreamReader> reader_;
+  std::unique_ptr<StreamReader> reader_;  // holds the stream's state, and so keeps the source alive
 };
 
 // Batches sent one after another with one in flight (StreamingPublisher).
