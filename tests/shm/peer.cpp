@@ -20,6 +20,8 @@
 //   shm_peer batch_publish <domain> <topic> <count>              the same in batches of 1 to 61 (loan_some)
 //   shm_peer leave_segments <domain> <topic>                     create a topic, print, sleep (to be killed)
 //   shm_peer serve    <domain> <service> <echo|twice|plus|hang>  serve until killed (hang: answers nothing, says "running")
+//   shm_peer loop     <domain> <name> <period_ms>                a periodic loop whose cycle 3 runs two periods
+//                     (one overrun); prints "looping" after cycle 5, then runs until killed
 //   shm_peer ticks    <domain> <topic> <hz> <age_ms>             publish Ticks at hz, each stamped age_ms in the past
 //   shm_peer raw      <domain> <topic>                           publish one Raw {0x1122334455667788, 42}, then wait
 //   shm_peer listen   <domain> <topic>                           print each Tick received: "tick <n> <x> <tag>"
@@ -284,6 +286,16 @@ int main(int argc, char** argv) {
     auto publisher = core.publisher<std::uint64_t>(topic);
     (void)publisher.publish(42);
     say("created");
+    forever();
+  }
+  if (role == "loop" && argc == 5) {
+    const auto period = std::chrono::milliseconds{arg(4)};
+    std::atomic<bool> said{false};
+    auto loop = every(core, period, [&](Token) {
+      const auto tick = this_tick();
+      if (tick->cycle == 3) std::this_thread::sleep_for(2 * period);
+      if (tick->cycle >= 5 && !said.exchange(true)) say("looping");
+    }, {.name = topic});
     forever();
   }
   if (role == "serve" && argc == 5) {

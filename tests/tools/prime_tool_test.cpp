@@ -154,10 +154,52 @@ TEST(PrimeTool, LsAndInfoShowATopicAndAServiceOfRunningPeersWithTypesAndPids) {
 
   const auto missing = prime(domain, {"info", "tool/nothing"});
   EXPECT_EQ(missing.code, 3) << "not found";
-  EXPECT_NE(missing.out.find("no topic or service 'tool/nothing'"), std::string::npos) << missing.out;
+  EXPECT_NE(missing.out.find("no topic, service or loop 'tool/nothing'"), std::string::npos) << missing.out;
   const auto no_domain = prime(unique_domain("absent"), {"ls"});
   EXPECT_EQ(no_domain.code, 3);
   EXPECT_NE(no_domain.out.find("no shm domain"), std::string::npos) << no_domain.out;
+}
+
+TEST(PrimeTool, LsAndInfoShowTheLoopsOfARunningParticipantWithTheirStatisticsUntilItDies) {
+  const auto domain = unique_domain("tool-loop");
+  PeerProcess looping{{"loop", domain, "control", "10"}};
+  ASSERT_TRUE(looping.says("looping"));
+  const auto json = last_json(prime(domain, {"--json", "ls"}).out);
+  const auto& loops = json.object().at("loops").array();
+  ASSERT_EQ(loops.size(), 1u) << "one loop, in the peer";
+  EXPECT_EQ(text(loops[0], "name"), "control");
+  EXPECT_EQ(text(loops[0], "participant"), "peer-loop");
+  EXPECT_EQ(number(loops[0], "pid"), looping.pid());
+  EXPECT_EQ(number(loops[0], "period_ms"), 10);
+  EXPECT_EQ(number(loops[0], "deadline_ms"), 10) << "the period, when not given";
+  EXPECT_GE(number(loops[0], "ticks"), 6) << "cycles 0 to 5 ran before the peer said so";
+  EXPECT_GE(number(loops[0], "overruns"), 1) << "cycle 3 ran two periods";
+  const auto& run_time = loops[0].object().at("run_time");
+  EXPECT_GE(number(run_time, "max_ms"), 20) << "cycle 3 ran two periods";
+  EXPECT_LE(number(run_time, "p50_ms"), number(run_time, "p99_ms"));
+  EXPECT_LE(number(run_time, "p99_ms"), number(run_time, "max_ms"));
+
+  const auto ls = prime(domain, {"ls"});
+  EXPECT_NE(ls.out.find("LOOPS"), std::string::npos) << ls.out;
+  EXPECT_NE(ls.out.find("peer-loop (" + std::to_string(looping.pid()) + ")"), std::string::npos) << ls.out;
+  const auto info = prime(domain, {"info", "control"});
+  EXPECT_EQ(info.code, 0) << info.out;
+  EXPECT_NE(info.out.find("loop control\n  participant: peer-loop (pid " + std::to_string(looping.pid()) + ")"),
+            std::string::npos) << info.out;
+  EXPECT_NE(info.out.find("\n  period: 10.000 ms\n"), std::string::npos) << info.out;
+  EXPECT_NE(info.out.find("\n  lateness: p50 "), std::string::npos) << info.out;
+
+  // The ticks go on while the tool looks: the figures are live.
+  const auto later = [&] {
+    const auto j = last_json(prime(domain, {"--json", "info", "control"}).out);
+    return number(j.array().at(0), "ticks");
+  };
+  const auto before = number(loops[0], "ticks");
+  EXPECT_TRUE(within(10s, [&] { return later() > before; }));
+
+  looping.kill9();
+  const auto gone = last_json(prime(domain, {"--json", "ls"}).out);
+  EXPECT_TRUE(gone.object().at("loops").array().empty()) << "a dead participant's loop is not listed";
 }
 
 TEST(PrimeTool, HzReportsAHundredHertzPublisherWithinTenPercent) {

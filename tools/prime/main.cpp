@@ -117,8 +117,8 @@ int main(int argc, char** argv) {
   command("domains", "the shared-memory domains on this machine", [&] { return shm_domains(o); });
   command("ls", "participants, topics and services of the domain", [&] { return shm_ls(o); },
           [&] { return optimus_ls(o); });
-  command("info", "one topic or service in full", [&] { return shm_info(o); }, [&] { return optimus_info(o); })
-      ->add_option("name", o.name, "the topic or service")
+  command("info", "one topic, service or loop in full", [&] { return shm_info(o); }, [&] { return optimus_info(o); })
+      ->add_option("name", o.name, "the topic, service or loop")
       ->required();
   auto* hz = command("hz", "a topic's rate: mean, min and max period, standard deviation", [&] { return shm_watch(o, "hz"); },
                      [&] { return optimus_watch(o, "hz"); });

@@ -158,6 +158,21 @@ std::string service_json(const shm::RegistrySnapshot::Service& v) {
          ",\"reply_schema\":" + quote(v.reply_schema) + "}";
 }
 
+// A duration in milliseconds, to the microsecond.
+std::string ms(Clock::duration d) { return fixed(std::chrono::duration<double, std::milli>{d}.count()); }
+std::string ms_json(Clock::duration d) { return fixed(std::chrono::duration<double, std::milli>{d}.count(), 6); }
+
+std::string loop_json(const shm::RegistrySnapshot::Loop& l) {
+  const auto spread = [](const DurationStats& d) {
+    return "{\"p50_ms\":" + ms_json(d.p50) + ",\"p99_ms\":" + ms_json(d.p99) + ",\"max_ms\":" + ms_json(d.max) + "}";
+  };
+  return "{\"name\":" + quote(l.name) + ",\"participant\":" + quote(l.participant) + ",\"pid\":" + std::to_string(l.pid) +
+         ",\"period_ms\":" + ms_json(l.period) + ",\"deadline_ms\":" + ms_json(l.deadline) +
+         ",\"ticks\":" + std::to_string(l.stats.ticks) + ",\"overruns\":" + std::to_string(l.stats.overruns) +
+         ",\"skipped\":" + std::to_string(l.stats.skipped) + ",\"lateness\":" + spread(l.stats.lateness) +
+         ",\"run_time\":" + spread(l.stats.run_time) + "}";
+}
+
 // A topic read by this tool in the slot each topic keeps for tools.
 struct Watch {
   shm::Core core;
@@ -261,6 +276,8 @@ int shm_ls(const Options& o) {
     for (std::size_t i = 0; i < second.topics.size(); ++i) out += (i ? "," : "") + topic_json(second.topics[i], rate(second.topics[i]));
     out += "],\"services\":[";
     for (std::size_t i = 0; i < second.services.size(); ++i) out += (i ? "," : "") + service_json(second.services[i]);
+    out += "],\"loops\":[";
+    for (std::size_t i = 0; i < second.loops.size(); ++i) out += (i ? "," : "") + loop_json(second.loops[i]);
     std::cout << out << "]}\n";
     return kOk;
   }
@@ -282,6 +299,13 @@ int shm_ls(const Options& o) {
                   v.server_pid ? v.server + " (" + std::to_string(v.server_pid) + ")" : "-", pids(v.client_pids),
                   std::to_string(v.served), std::to_string(v.failed)});
   services.print(std::cout);
+  std::cout << "\nLOOPS\n";
+  Table loops{{"NAME", "PARTICIPANT", "PERIOD", "TICKS", "OVERRUNS", "LATE p99", "RUN p99", "RUN max"}};
+  for (const auto& l : second.loops)
+    loops.add({l.name, l.participant + " (" + std::to_string(l.pid) + ")", ms(l.period) + " ms", std::to_string(l.stats.ticks),
+               std::to_string(l.stats.overruns), ms(l.stats.lateness.p99) + " ms", ms(l.stats.run_time.p99) + " ms",
+               ms(l.stats.run_time.max) + " ms"});
+  loops.print(std::cout);
   return kOk;
 }
 
@@ -327,7 +351,29 @@ int shm_info(const Options& o) {
               << "\nrequest fields\n" << fields(v->request_schema) << "reply fields\n" << fields(v->reply_schema);
     return kOk;
   }
-  throw Failure{{Errc::not_found, "no topic or service '" + o.name + "' in shm domain '" + o.domain + "'"}};
+  // Loops are named by their participant; several may share a name.
+  std::vector<const shm::RegistrySnapshot::Loop*> loops;
+  for (const auto& l : s.loops)
+    if (l.name == o.name) loops.push_back(&l);
+  if (!loops.empty()) {
+    if (o.json) {
+      std::string out = "[";
+      for (std::size_t i = 0; i < loops.size(); ++i) out += (i ? "," : "") + loop_json(*loops[i]);
+      std::cout << out << "]\n";
+      return kOk;
+    }
+    for (const auto* l : loops) {
+      const auto spread = [](const DurationStats& d) {
+        return "p50 " + ms(d.p50) + " ms, p99 " + ms(d.p99) + " ms, max " + ms(d.max) + " ms";
+      };
+      std::cout << "loop " << l->name << "\n  participant: " << l->participant << " (pid " << l->pid << ")\n  period: "
+                << ms(l->period) << " ms\n  deadline: " << ms(l->deadline) << " ms\n  ticks: " << l->stats.ticks
+                << "\n  overruns: " << l->stats.overruns << "\n  skipped: " << l->stats.skipped
+                << "\n  lateness: " << spread(l->stats.lateness) << "\n  run time: " << spread(l->stats.run_time) << '\n';
+    }
+    return kOk;
+  }
+  throw Failure{{Errc::not_found, "no topic, service or loop '" + o.name + "' in shm domain '" + o.domain + "'"}};
 }
 
 int shm_watch(const Options& o, const std::string& command) {

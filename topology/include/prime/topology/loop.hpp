@@ -129,17 +129,46 @@ struct Schedule {
   }
 };
 
-// What a loop's worker and its handle share.
-struct LoopState {
-  LoopState(std::string n, Schedule s, Missed m) : name{std::move(n)}, schedule{s}, missed{m} {}
-
-  const std::string name;
-  const Schedule schedule;
-  const Missed missed;
+// What a loop's thread records of its runs: atomics only, at fixed
+// offsets, so it may live in memory shared with tools (a medium's
+// `record_loop`, below) as well as in this process's heap.
+struct LoopRecord {
   DurationHistogram lateness;
   DurationHistogram run_time;
   std::atomic<std::uint64_t> overruns{0};
   std::atomic<std::uint64_t> skipped{0};
+};
+static_assert(std::is_standard_layout_v<LoopRecord> && std::atomic<std::uint64_t>::is_always_lock_free,
+              "a LoopRecord may sit in shared memory");
+
+// The statistics of `r`, read while its loop records.
+[[nodiscard]] inline LoopStats stats_of(const LoopRecord& r) noexcept {
+  const auto spread = [](const DurationHistogram& h) { return DurationStats{h.percentile(0.5), h.percentile(0.99), h.max()}; };
+  return {r.run_time.count(), r.overruns.load(std::memory_order_relaxed), r.skipped.load(std::memory_order_relaxed),
+          spread(r.lateness), spread(r.run_time)};
+}
+
+// Where a loop of `core` records: a medium that shows its loops to tools
+// gives the place (`core.record_loop(name, period, deadline)`, held for as
+// long as the loop lives; Shm's is in its domain's registry, for `prime ls`
+// and `prime info`); otherwise this process's heap.
+template <class M>
+std::shared_ptr<LoopRecord> loop_record(M& core, const std::string& name, Clock::duration period, Clock::duration deadline) {
+  if constexpr (requires { { core.record_loop(name, period, deadline) } -> std::same_as<std::shared_ptr<LoopRecord>>; })
+    return core.record_loop(name, period, deadline);
+  else
+    return std::make_shared<LoopRecord>();
+}
+
+// What a loop's worker and its handle share.
+struct LoopState {
+  LoopState(std::string n, Schedule s, Missed m, std::shared_ptr<LoopRecord> r)
+      : name{std::move(n)}, schedule{s}, missed{m}, record{std::move(r)} {}
+
+  const std::string name;
+  const Schedule schedule;
+  const Missed missed;
+  const std::shared_ptr<LoopRecord> record;
   std::atomic<bool> stopping{false};
   std::mutex mutex;
   std::condition_variable done_cv;
@@ -163,13 +192,14 @@ void run_loop(LoopState& s, C& chain, const std::weak_ptr<RuntimeState>& runtime
     std::snprintf(text, sizeof text, "%.3f ms", std::chrono::duration<double, std::milli>{d}.count());
     return std::string{text};
   };
+  auto& r = *s.record;
   Tick tick{};
   current_tick = &tick;
   for (std::uint64_t cycle = 0;;) {
     tick = {cycle, s.schedule.at(cycle), s.schedule.at(cycle) + s.schedule.deadline};
     if (!sleep_until(tick.time, stopped)) break;
     const auto began = Clock::now();
-    s.lateness.record(began - tick.time);
+    r.lateness.record(began - tick.time);
     try {
       (void)chain(Token{});
     } catch (const std::exception& e) {
@@ -181,11 +211,11 @@ void run_loop(LoopState& s, C& chain, const std::weak_ptr<RuntimeState>& runtime
                                                ": an exception of unknown type"});
     }
     const auto ended = Clock::now();
-    s.run_time.record(ended - began);
+    r.run_time.record(ended - began);
     const auto next = s.schedule.next(cycle, ended, s.missed);
-    if (next > cycle + 1) s.skipped.store(s.skipped.load(std::memory_order_relaxed) + (next - cycle - 1), std::memory_order_relaxed);
+    if (next > cycle + 1) r.skipped.store(r.skipped.load(std::memory_order_relaxed) + (next - cycle - 1), std::memory_order_relaxed);
     if (ended > tick.deadline) {
-      s.overruns.store(s.overruns.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+      r.overruns.store(r.overruns.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
       std::string what = "loop '" + s.name + "', cycle " + std::to_string(cycle) + ": ended " + ms(ended - tick.deadline) +
                          " after its deadline (" + ms(s.schedule.deadline) + " after its time; it started " +
                          ms(began - tick.time) + " late and ran " + ms(ended - began) + ")";
@@ -234,13 +264,7 @@ class Loop {
     state_->done_cv.wait(lock, [&] { return state_->done; });
   }
 
-  [[nodiscard]] LoopStats stats() const {
-    const auto spread = [](const detail::DurationHistogram& h) {
-      return DurationStats{h.percentile(0.5), h.percentile(0.99), h.max()};
-    };
-    return {state_->run_time.count(), state_->overruns.load(std::memory_order_relaxed),
-            state_->skipped.load(std::memory_order_relaxed), spread(state_->lateness), spread(state_->run_time)};
-  }
+  [[nodiscard]] LoopStats stats() const { return detail::stats_of(*state_->record); }
 
   [[nodiscard]] const std::string& name() const noexcept { return state_->name; }
   [[nodiscard]] Clock::duration period() const noexcept { return state_->schedule.period; }
@@ -285,7 +309,8 @@ template <Medium M, class C>
   auto runtime = core.runtime().lock();
   if (!runtime) throw Failure{{Errc::stopped, "loop '" + options.name + "': the core is gone"}};
   auto state = std::make_shared<detail::LoopState>(
-      options.name, detail::Schedule::aligned(Clock::now(), period, options.phase, deadline), options.missed);
+      options.name, detail::Schedule::aligned(Clock::now(), period, options.phase, deadline), options.missed,
+      detail::loop_record(core, options.name, period, deadline));
   runtime->spawn([state, chain = std::move(chain), weak = core.runtime(),
                   realtime = options.realtime](std::stop_token stop) mutable {
     auto refused = detail::apply_realtime(realtime, "loop '" + state->name + "'");

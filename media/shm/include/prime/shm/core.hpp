@@ -233,7 +233,7 @@ class Core : public ErasedChainRuntime {
     return {{std::move(binding)}, Graph::node(name, "service", "shm")};
   }
 
-  // The domain's participants, topics and services as they are now.
+  // The domain's participants, topics, services and loops as they are now.
   [[nodiscard]] RegistrySnapshot registry() { return detail::snapshot(registry_); }
 
   // Reclaims what dead participants left behind: their registry entries,
@@ -272,6 +272,25 @@ class Core : public ErasedChainRuntime {
   }
 
   [[nodiscard]] const std::string& domain() const noexcept { return registry_->domain(); }
+
+  // Where a periodic loop of this core (prime::every) records its
+  // statistics: an entry of the domain's registry, so that `prime ls` and
+  // `prime info` show them while it runs; freed with the loop. Throws
+  // Errc::domain_full when the domain lists its maximum of loops.
+  [[nodiscard]] std::shared_ptr<prime::detail::LoopRecord> record_loop(const std::string& name, Clock::duration period,
+                                                                      Clock::duration deadline) {
+    struct Entry {
+      Entry(std::shared_ptr<detail::Registry> r, std::size_t i) : registry{std::move(r)}, index{i} {}
+      Entry(const Entry&) = delete;
+      Entry& operator=(const Entry&) = delete;
+      ~Entry() { registry->remove_loop(index); }
+      const std::shared_ptr<detail::Registry> registry;
+      const std::size_t index;
+    };
+    auto entry = std::make_shared<Entry>(registry_, registry_->add_loop(name, period, deadline));
+    auto& record = registry_->loop_record(entry->index);
+    return {std::move(entry), &record};
+  }
 
  private:
   // A raw reply larger than its room: this service's max_reply_size, or, in

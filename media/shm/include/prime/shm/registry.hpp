@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "prime/shm/qos.hpp"
+#include "prime/topology/loop.hpp"
 
 namespace prime::shm {
 
@@ -45,9 +46,18 @@ struct RegistrySnapshot {
     std::string request_schema;  // the types' descriptions (prime::schema_of)
     std::string reply_schema;
   };
+  struct Loop {
+    std::string name;
+    std::string participant;  // the participant running it, and its pid
+    std::uint32_t pid;
+    Clock::duration period;
+    Clock::duration deadline;
+    LoopStats stats;  // as its thread has recorded them so far
+  };
   std::vector<Participant> participants;
   std::vector<Topic> topics;
   std::vector<Service> services;
+  std::vector<Loop> loops;
 };
 
 }  // namespace prime::shm

@@ -20,11 +20,13 @@
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/segment.hpp"
 #include "prime/shm/registry.hpp"
+#include "prime/topology/loop.hpp"
 
 namespace prime::shm::detail {
 
 inline constexpr std::size_t kMaxParticipants = 128;
 inline constexpr std::size_t kMaxEndpoints = 512;  // topics and services
+inline constexpr std::size_t kMaxLoops = 64;
 
 // What a registry entry names, and the kind in its segment's name.
 enum class EndpointKind : std::uint32_t { topic = 1, service = 2 };
@@ -48,10 +50,20 @@ struct RegistryLayout {
     EndpointKind kind = EndpointKind::topic;
     char name[kNameCapacity]{};
   };
+  // A periodic loop of a participant, and what its thread records there
+  // (prime::every): tools read its statistics while it runs.
+  struct Loop {
+    std::atomic<ParticipantId> owner{0};  // 0: free; a dead owner's may be taken
+    char name[48]{};
+    std::int64_t period_ns = 0;
+    std::int64_t deadline_ns = 0;
+    prime::detail::LoopRecord record;
+  };
   std::atomic<std::uint64_t> magic{0};
   std::atomic<std::uint64_t> generation{0};  // participant ids handed out so far
   Participant participants[kMaxParticipants];
   Endpoint endpoints[kMaxEndpoints];
+  Loop loops[kMaxLoops];
 };
 
 [[nodiscard]] inline std::uint64_t own_pid_namespace() {
@@ -211,6 +223,53 @@ class Registry : public std::enable_shared_from_this<Registry> {
     for (auto& p : layout().participants) {
       const auto id = p.id.load();
       if (id != 0) list.push_back({read_text(p.name), p.pid, p.pid_namespace, alive(id)});
+    }
+    return list;
+  }
+
+  // Lists a loop of this participant; its statistics are recorded in the
+  // entry until `remove_loop(index)`. Takes a free entry, or one whose
+  // owner died.
+  std::size_t add_loop(const std::string& name, Clock::duration period, Clock::duration deadline) {
+    Locked lock{*this};
+    auto& r = layout();
+    for (std::size_t i = 0; i < kMaxLoops; ++i) {
+      auto& l = r.loops[i];
+      if (const auto owner = l.owner.load(); owner != 0 && alive(owner)) continue;
+      // Each of its pages written here, by the process whose thread will
+      // record: the loop's ticks then take no page fault.
+      std::destroy_at(&l.record);
+      ::new (&l.record) prime::detail::LoopRecord{};
+      copy_name(l.name, name);
+      l.period_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(period).count();
+      l.deadline_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(deadline).count();
+      l.owner.store(me_);
+      return i;
+    }
+    throw Failure{{Errc::domain_full, "shm domain '" + domain_ + "' has its maximum of " + std::to_string(kMaxLoops) +
+                                          " loops shown to tools (loop '" + name + "')"}};
+  }
+  // The loop's place for its thread to record, in entry `index`.
+  [[nodiscard]] prime::detail::LoopRecord& loop_record(std::size_t index) const { return layout().loops[index].record; }
+  void remove_loop(std::size_t index) noexcept {
+    try {
+      Locked lock{*this};
+      auto owner = me_;
+      layout().loops[index].owner.compare_exchange_strong(owner, 0);
+    } catch (...) {
+      // The entry stays until this participant is gone: then it is free.
+    }
+  }
+
+  // The live participants' loops, with their statistics as of now.
+  [[nodiscard]] std::vector<RegistrySnapshot::Loop> loops() {
+    Locked lock{*this};
+    std::vector<RegistrySnapshot::Loop> list;
+    for (const auto& l : layout().loops) {
+      const auto owner = l.owner.load();
+      if (owner == 0 || !alive(owner)) continue;
+      list.push_back({read_text(l.name), name_of(owner), pid_of(owner), std::chrono::nanoseconds{l.period_ns},
+                      std::chrono::nanoseconds{l.deadline_ns}, prime::detail::stats_of(l.record)});
     }
     return list;
   }

@@ -29,7 +29,8 @@ inline std::shared_ptr<Service> open_or_skip(const std::shared_ptr<Registry>& re
   }
 }
 
-// What `registry`'s domain holds now: its participants, topics and services.
+// What `registry`'s domain holds now: its participants, topics, services
+// and loops.
 inline RegistrySnapshot snapshot(const std::shared_ptr<Registry>& registry) {
   RegistrySnapshot s;
   s.participants = registry->participants();
@@ -64,6 +65,7 @@ inline RegistrySnapshot snapshot(const std::shared_ptr<Registry>& registry) {
         v.client_pids.push_back(registry->pid_of(owner));
     s.services.push_back(std::move(v));
   }
+  s.loops = registry->loops();
   return s;
 }
 

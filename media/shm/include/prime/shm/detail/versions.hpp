@@ -14,7 +14,7 @@ namespace prime::shm::detail {
 // registry has no version word, so its magic's last character counts.
 // (Error codes also cross processes: their numbers are kept in
 // prime/logic/error.hpp.)
-inline constexpr std::uint64_t kRegistryMagic = 0x5052494d45524733ull;  // "PRIMERG3"
+inline constexpr std::uint64_t kRegistryMagic = 0x5052494d45524734ull;  // "PRIMERG4"
 inline constexpr std::uint64_t kTopicMagic = 0x5052494d45534d34ull;     // "PRIMESM4"
 inline constexpr std::uint32_t kTopicLayout = 12;
 inline constexpr std::uint64_t kServiceMagic = 0x5052494d45535633ull;  // "PRIMESV3"
