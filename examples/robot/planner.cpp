@@ -72,19 +72,21 @@ int planner(const std::string& domain, Trigger trigger, const std::atomic<bool>&
   std::optional<prime::LocalSource<int>> on_each;
   if (trigger == Trigger::periodic) {
     auto newest = prime::collector(local, sets, prime::or_nothing);  // nothing before the first pair
-    loop.emplace(prime::every(local, 20ms, [&, newest](prime::Token) {
+    loop.emplace(prime::every(shm, 20ms, [&, newest](prime::Token) {
       if (const auto sensed = newest(prime::Token{})) drive(*sensed);
       else ++waiting;  // no synchronised pair yet
-    }, {.name = "control"}));
+    }, {.name = "control", .deadline = 15ms}));
   } else {
     on_each.emplace(sets | local.chain([&](const Sensed& sensed) {
       drive(sensed);
       return 0;
     }, "drive"));
   }
-  auto errors = local.errors().subscribe();
+  auto errors = shm.errors().subscribe();  // the loop's overruns; the chains' errors below
+  auto chain_errors = local.errors().subscribe();
   while (!stop) {
     if (auto e = errors.read_for(1s)) std::printf("[planner] %s\n", e->value.describe().c_str());
+    while (auto e = chain_errors.try_read()) std::printf("[planner] %s\n", e->value.describe().c_str());
     std::string shown = std::to_string(sent.exchange(0)) + " commands sent";
     if (loop) {
       const auto s = loop->stats();

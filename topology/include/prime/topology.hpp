@@ -20,3 +20,4 @@
 #include "prime/topology/repeat.hpp"
 #include "prime/topology/runtime.hpp"
 #include "prime/topology/sync.hpp"
+#include "prime/topology/watchdog.hpp"

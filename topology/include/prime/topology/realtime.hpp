@@ -65,9 +65,9 @@ inline std::optional<Error> apply_realtime(const Realtime& realtime, const std::
       std::string usable;
       if (::sched_getaffinity(0, sizeof allowed, &allowed) == 0)
         for (int cpu = 0; cpu < CPU_SETSIZE; ++cpu)
-          if (CPU_ISSET(cpu, &allowed)) usable += (usable.empty() ? "" : ",") + std::to_string(cpu);
+          if (CPU_ISSET(cpu, &allowed)) usable.append(usable.empty() ? "" : ",").append(std::to_string(cpu));
       std::string asked;
-      for (const int cpu : realtime.cpus) asked += (asked.empty() ? "" : ",") + std::to_string(cpu);
+      for (const int cpu : realtime.cpus) asked.append(asked.empty() ? "" : ",").append(std::to_string(cpu));
       return Error{Errc::refused, who + ": CPU affinity {" + asked + "} was refused (" + std::strerror(e) +
                                       "); this process may run on {" + usable + "} (see taskset, cgroup cpusets)"};
     }
