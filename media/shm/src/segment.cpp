@@ -65,7 +65,7 @@ std::optional<Segment> Segment::open_existing(const std::string& name, const std
                               Mapping{bip::shared_memory_object{bip::open_only, name.c_str(), bip::read_write}, {}})};
     segment.check(access.value_or(Access{}), "shared memory '" + name + "'", access.has_value());
     if (segment.file_size() == 0) return std::nullopt;
-    segment.map();
+    segment.map(access && access->prefault);
     return segment;
   } catch (const bip::interprocess_exception& e) {
     if (e.get_error_code() == bip::not_found_error) return std::nullopt;
@@ -137,10 +137,17 @@ void Segment::reserve(std::size_t size, const std::string& what) {
                      std::to_string(free) + " bytes free (" + std::strerror(error) + ")"}};
 }
 
-void Segment::map() {
+void Segment::map(bool prefault) {
   mapping_->region = bip::mapped_region{mapping_->object, bip::read_write};
   data_ = static_cast<std::byte*>(mapping_->region.get_address());
   size_ = mapping_->region.get_size();
+  if (!prefault || size_ == 0) return;
+  // Linux 5.14 and later map every page in writable, changing no byte.
+  if (::madvise(data_, size_, MADV_POPULATE_WRITE) == 0) return;
+  // Before that, a read of each page maps it in: tmpfs maps a page of a
+  // shared writable mapping writable on a read (it tracks no dirty pages).
+  const auto page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  for (std::size_t at = 0; at < size_; at += page) (void)*reinterpret_cast<volatile const std::byte*>(data_ + at);
 }
 
 std::string unescape(std::string_view text) {

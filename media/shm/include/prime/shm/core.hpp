@@ -105,7 +105,9 @@ class Core : public ErasedChainRuntime {
   explicit Core(std::string domain, DomainOptions options = {})
       : ErasedChainRuntime{"shm"},
         registry_{detail::Registry::join(domain,
-                                         {.permissions = options.permissions, .owner = options.owner.value_or(::geteuid())},
+                                         {.permissions = options.permissions,
+                                          .owner = options.owner.value_or(::geteuid()),
+                                          .prefault = options.prefault},
                                          options.participant.empty() ? program_name() : options.participant,
                                          options.only_if_alive)} {
     reclaim();

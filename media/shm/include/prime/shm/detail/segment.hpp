@@ -25,9 +25,14 @@ inline constexpr const char* kShmDirectory = "/dev/shm";
 // `permissions`. Another user of the machine who made a domain's files
 // first (before its participants came) would otherwise have them set up
 // and used in files that user maps read-write.
+//
+// And how segments are mapped: with `prefault`, every page of a segment is
+// mapped in as it is opened, so that no later access to it takes a page
+// fault (the first publish into a chunk, say).
 struct Access {
   unsigned permissions = 0600;
   uid_t owner = ::geteuid();
+  bool prefault = false;
 };
 
 // What is wrong with the file open at `fd` for `access`
@@ -65,11 +70,11 @@ class Segment {
       } unlock{segment.fd()};
       if (!segment.linked()) continue;  // removed while we waited: open what replaced it
       if (segment.file_size() > 0) {
-        segment.map();
+        segment.map(access.prefault);
         if (is_ready(segment.data(), segment.size())) return segment;
       }
       segment.reserve(size, what);
-      segment.map();
+      segment.map(access.prefault);
       set_up(segment.data(), segment.size());
       return segment;
     }
@@ -117,7 +122,8 @@ class Segment {
   // or another program zeroed it) may be mapped by live participants, and
   // cutting pages out from under them would kill each with SIGBUS.
   void reserve(std::size_t size, const std::string& what);
-  void map();
+  // Maps the segment read-write; with `prefault`, each of its pages in.
+  void map(bool prefault);
 
   std::string name_;
   std::unique_ptr<Mapping> mapping_;
