@@ -21,265 +21,34 @@
 //                    request with a loaned N-byte response carrying its
 //                    number. One request is outstanding at a time.
 //
-// iceoryx's runtime can be initialised once per process: the parent's lives
-// until exit, each child's for one benchmark run.
+// RouDi and the runtimes: iceoryx_runtime.hpp.
 
-#include <fcntl.h>
-#include <signal.h>
-#include <sys/file.h>
-#include <sys/mman.h>
-#include <unistd.h>
-
-#include <atomic>
-#include <cerrno>
-#include <charconv>
 #include <cstdint>
-#include <cstdlib>
-#include <filesystem>
 #include <optional>
 #include <string>
-#include <string_view>
-#include <system_error>
 
 #include "harness.hpp"
-#include "iceoryx_hoofs/log/logmanager.hpp"
-#include "iceoryx_hoofs/platform/platform_settings.hpp"
 #include "iceoryx_posh/popo/untyped_client.hpp"
 #include "iceoryx_posh/popo/untyped_publisher.hpp"
 #include "iceoryx_posh/popo/untyped_server.hpp"
 #include "iceoryx_posh/popo/untyped_subscriber.hpp"
 #include "iceoryx_posh/popo/wait_set.hpp"
-#include "iceoryx_posh/runtime/posh_runtime.hpp"
+#include "iceoryx_runtime.hpp"
 #include "payload.hpp"
-#include "unique_fd.hpp"
 
 namespace {
 
 namespace ipc = prime::bench::ipc;
-namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-// ---- RouDi -----------------------------------------------------------------
-
-// The lock every RouDi holds while it runs (iceoryx 2.0: ROUDI_LOCK_NAME in
-// IOX_LOCK_FILE_PATH_PREFIX).
-constexpr const char* kRoudiLock = "/tmp/iox-unique-roudi.lock";
-constexpr const char* kRoudiReady = "RouDi is ready for clients";
-
-// Mempools: every payload size the benchmarks loan, with room for a stream's
-// full queue (kStreamDepth) plus the chunks a publisher may hold (8) and
-// slack. `size` is the user payload; RouDi adds the chunk header (40 B). A
-// request or response also carries an RPC header (24 or 32 B) in the same
-// chunk, so its N bytes do not fit the pool for N: the pools of N + 1 KiB
-// hold the round trips' chunks (two at a time: one request, one response),
-// which would otherwise take the next larger pool's (a 1 MiB request a 4 MiB
-// chunk) or, with none larger, abort the process: iceoryx 2.0 treats a chunk
-// too large for every pool as fatal (MEPOO__MEMPOOL_GETCHUNK_CHUNK_IS_TOO_LARGE)
-// instead of failing the loan. RouDi writes zeros over all of it: about
-// 460 MiB of /dev/shm while it runs.
-constexpr const char* kRoudiConfig = R"(# Written by prime_ipc for the RouDi it starts.
-[general]
-version = 1
-
-[[segment]]
-
-[[segment.mempool]]
-size = 128
-count = 1024
-
-[[segment.mempool]]
-size = 4096
-count = 64
-
-[[segment.mempool]]
-size = 5120
-count = 8
-
-[[segment.mempool]]
-size = 65536
-count = 64
-
-[[segment.mempool]]
-size = 66560
-count = 8
-
-[[segment.mempool]]
-size = 1048576
-count = 320
-
-[[segment.mempool]]
-size = 1049600
-count = 8
-
-[[segment.mempool]]
-size = 4194304
-count = 16
-)";
-
-// A file in memory only (a memfd), for RouDi's config and its output, so
-// that a run leaves no file behind however it ends. A child that inherits
-// fd() opens it as path().
-class MemoryFile {
- public:
-  explicit MemoryFile(const char* name) : fd_{::memfd_create(name, MFD_CLOEXEC)} {
-    if (!fd_) throw std::system_error{errno, std::generic_category(), "memfd_create"};
-  }
-
-  [[nodiscard]] int fd() const noexcept { return fd_.get(); }
-  [[nodiscard]] std::string path() const { return "/proc/self/fd/" + std::to_string(fd_.get()); }
-
-  void write(std::string_view text) {
-    while (!text.empty()) {
-      const ssize_t n = ::write(fd_.get(), text.data(), text.size());
-      if (n < 0 && errno != EINTR) throw std::system_error{errno, std::generic_category(), "write"};
-      if (n > 0) text.remove_prefix(static_cast<std::size_t>(n));
-    }
-  }
-
-  [[nodiscard]] std::string read() const {
-    std::string text;
-    char chunk[4096];
-    for (ssize_t n; (n = ::pread(fd_.get(), chunk, sizeof chunk, static_cast<off_t>(text.size()))) > 0;)
-      text.append(chunk, static_cast<std::size_t>(n));
-    return text;
-  }
-
- private:
-  ipc::UniqueFd fd_;
-};
-
-// Throws if a RouDi is running that this process did not start: there can be
-// only one per machine, and a foreign one has its own mempools (and clients).
-void refuse_foreign_roudi() {
-  const ipc::UniqueFd lock{::open(kRoudiLock, O_RDONLY | O_CLOEXEC)};
-  if (!lock) return;  // no RouDi has run since boot
-  if (::flock(lock.get(), LOCK_EX | LOCK_NB) != 0) {
-    if (errno != EWOULDBLOCK) throw std::system_error{errno, std::generic_category(), std::string{"flock "} + kRoudiLock};
-    throw ipc::PeerError{std::string{"an iox-roudi that prime_ipc did not start is running (it holds "} + kRoudiLock +
-                         "); stop it first: prime_ipc starts its own, with mempools for payloads up to 4 MiB"};
-  }
-  ::flock(lock.get(), LOCK_UN);
-}
-
-// Removes what runtimes of an earlier, killed prime_ipc left in /tmp: iceoryx
-// 2.0 leaves a socket and a lock file per runtime, and ours are named after
-// the parent's pid (prime-ipc-<pid>, prime-ipc-child-<pid>-<n>).
-void remove_stale_runtime_files() {
-  std::error_code error;
-  for (const auto& entry : fs::directory_iterator{iox::platform::IOX_UDS_SOCKET_PATH_PREFIX, error}) {
-    const std::string file = entry.path().filename().string();
-    std::string_view name = file;
-    if (!name.starts_with("prime-ipc-")) continue;
-    name.remove_prefix(std::string_view{"prime-ipc-"}.size());
-    if (name.starts_with("child-")) name.remove_prefix(std::string_view{"child-"}.size());
-    pid_t pid = 0;
-    const auto [end, parsed] = std::from_chars(name.data(), name.data() + name.size(), pid);
-    if (parsed != std::errc{} || pid == ::getpid()) continue;
-    if (::kill(pid, 0) != 0 && errno == ESRCH) fs::remove(entry.path(), error);
-  }
-}
-
-// The RouDi of this benchmark: started with a generated config, its output
-// kept in memory; stopped with SIGTERM (SIGKILL after five seconds).
-class Roudi {
- public:
-  Roudi() {
-    refuse_foreign_roudi();
-    remove_stale_runtime_files();
-    config_.write(kRoudiConfig);
-    ipc::ChildProcess::Options options;
-    options.inherit_fds = {config_.fd()};
-    options.cpus = ipc::startup_cpus();
-    options.output_fd = output_.fd();
-    process_.emplace(PRIME_IPC_IOX_ROUDI,
-                     std::vector<std::string>{PRIME_IPC_IOX_ROUDI, "-c", config_.path(), "-l", "info"}, options);
-    const auto deadline = std::chrono::steady_clock::now() + ipc::kPatience;
-    while (output_.read().find(kRoudiReady) == std::string::npos) {
-      if (const auto status = process_->poll())
-        fail("iox-roudi " + ipc::ChildProcess::describe(*status) + " before it was ready");
-      if (std::chrono::steady_clock::now() > deadline) fail("iox-roudi was not ready within 10 s");
-      std::this_thread::sleep_for(10ms);
-    }
-  }
-  Roudi(const Roudi&) = delete;
-  Roudi& operator=(const Roudi&) = delete;
-  ~Roudi() {
-    process_->signal(SIGTERM);
-    process_->wait_for(5s);
-  }
-
- private:
-  [[noreturn]] void fail(const std::string& what) {
-    std::string output = output_.read();
-    if (output.size() > 2000) output = "..." + output.substr(output.size() - 2000);
-    throw ipc::PeerError{what + "; its output:\n" + output};
-  }
-
-  MemoryFile config_{"prime-ipc-roudi.toml"};
-  MemoryFile output_{"prime-ipc-roudi.log"};
-  std::optional<ipc::ChildProcess> process_;
-};
-
-void quiet_iceoryx() {
-  iox::log::LogManager::GetLogManager().SetDefaultLogLevel(iox::log::LogLevel::kWarn,
-                                                           iox::log::LogLevelOutput::kHideLogLevel);
-}
-
-// Starts this process's RouDi and iceoryx runtime on first use. Statics end
-// in the reverse order of their construction, so at exit the runtime says
-// goodbye to RouDi before RouDi is stopped. Throws (and tries again on the
-// next call) if RouDi cannot be started.
-void start_iceoryx() {
-  static Roudi roudi;
-  static const bool runtime = [] {
-    quiet_iceoryx();
-    const std::string name = "prime-ipc-" + std::to_string(::getpid());
-    iox::runtime::PoshRuntime::initRuntime(iox::RuntimeName_t{iox::cxx::TruncateToCapacity, name});
-    return true;
-  }();
-  (void)runtime;
-}
-
-// A child's runtime is named after its topic, so that the parent knows it.
-std::string child_runtime_name(const std::string& topic) { return "prime-ipc-child-" + topic; }
-
-void start_child_runtime(const std::string& topic) {
-  quiet_iceoryx();
-  iox::runtime::PoshRuntime::initRuntime(iox::RuntimeName_t{iox::cxx::TruncateToCapacity, child_runtime_name(topic)});
-}
-
-// A runtime that is killed leaves its socket and lock file in /tmp (iceoryx
-// 2.0); the parent removes those of a child it had to kill once it is gone.
-class ChildRuntimeFiles {
- public:
-  explicit ChildRuntimeFiles(const std::string& topic)
-      : socket_{iox::platform::IOX_UDS_SOCKET_PATH_PREFIX + child_runtime_name(topic)},
-        lock_{iox::platform::IOX_LOCK_FILE_PATH_PREFIX + child_runtime_name(topic) + ".lock"} {}
-  ChildRuntimeFiles(const ChildRuntimeFiles&) = delete;
-  ChildRuntimeFiles& operator=(const ChildRuntimeFiles&) = delete;
-  ~ChildRuntimeFiles() {
-    ::unlink(socket_.c_str());
-    ::unlink(lock_.c_str());
-  }
-
- private:
-  std::string socket_;
-  std::string lock_;
-};
+// The RouDi, the runtimes and the topic names (iceoryx_runtime.hpp).
+using ipc::iceoryx::ChildRuntimeFiles;
+using ipc::iceoryx::new_topic;
+using ipc::iceoryx::service;
+using ipc::iceoryx::start_child_runtime;
+using ipc::iceoryx::start_iceoryx;
 
 // ---- topics -----------------------------------------------------------------
-
-// A fresh instance name per benchmark run, so a run never meets the ports of
-// the one before, which RouDi removes only in its next discovery cycle.
-std::string new_topic() {
-  static std::atomic<int> next{0};
-  return std::to_string(::getpid()) + "-" + std::to_string(next++);
-}
-
-iox::capro::ServiceDescription service(const std::string& topic, const char* event) {
-  return {"PrimeIpc", iox::capro::IdString_t{iox::cxx::TruncateToCapacity, topic},
-          iox::capro::IdString_t{iox::cxx::TruncateToCapacity, event}};
-}
 
 iox::popo::PublisherOptions blocking_publisher() {
   iox::popo::PublisherOptions options;

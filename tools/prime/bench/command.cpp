@@ -1,6 +1,7 @@
 // `prime bench`: every benchmark suite, one benchmark per process run (a
 // full run: each in rounds), with progress on stderr, into a report folder
-// (report.hpp says what is in it).
+// (report.hpp says what is in it). $PRIME_BENCH_SUITES=loop,ipc runs only
+// the suites it names.
 #include "command.hpp"
 
 #include <unistd.h>
@@ -177,7 +178,7 @@ void run_one(const Suite& suite, const std::filesystem::path& binary, const std:
 }
 
 // Each figure as the median of its rounds' values (the middle one, or the
-// lower of the two middle ones), in the order first measured; each skip once.
+// lower of the two middle ones), in the order first measured; each skip and note once.
 Results medians(const std::vector<Results>& rounds) {
   Results out;
   std::vector<std::vector<double>> values;
@@ -198,6 +199,8 @@ Results medians(const std::vector<Results>& rounds) {
       if (std::none_of(out.skipped.begin(), out.skipped.end(),
                        [&](const Skipped& t) { return t.suite == s.suite && t.benchmark == s.benchmark; }))
         out.skipped.push_back(s);
+    for (const auto& note : round.notes)
+      if (std::find(out.notes.begin(), out.notes.end(), note) == out.notes.end()) out.notes.push_back(note);
   }
   for (std::size_t i = 0; i < values.size(); ++i) {
     auto& v = values[i];
@@ -246,8 +249,17 @@ int run(const Options& options) {
   if (options.quick)
     for (const auto& suite : all)
       for (const auto& [name, value] : suite.quick_env) ::setenv(name.c_str(), value.c_str(), 0);
-  for (const auto& suite : all)
+  // $PRIME_BENCH_SUITES (names, comma-separated) runs only those suites;
+  // the others are listed as skipped, so a partial report says it is one.
+  const char* selected = std::getenv("PRIME_BENCH_SUITES");
+  const std::string only = selected ? "," + std::string{selected} + "," : "";
+  for (const auto& suite : all) {
+    if (!only.empty() && only != ",," && only.find("," + suite.name + ",") == std::string::npos) {
+      results.skipped.push_back({suite.name, "", "not selected (PRIME_BENCH_SUITES=" + std::string{selected} + ")"});
+      continue;
+    }
     for (auto& name : list(suite, bin_dir / suite.binary, options.quick, results)) plan.push_back({&suite, std::move(name)});
+  }
 
   std::cerr << "prime bench: " << plan.size() << " benchmarks" << (options.quick ? " (quick)" : "") << " on " << machine.cpu
             << ", " << machine.cpus << " CPUs; report in " << out.string() << '\n';
@@ -278,11 +290,13 @@ int run(const Options& options) {
   auto merged = medians(measured);
   results.figures = std::move(merged.figures);
   results.skipped.insert(results.skipped.end(), merged.skipped.begin(), merged.skipped.end());
+  results.notes = std::move(merged.notes);
 
   const RunInfo info{.quick = options.quick,
                      .interrupted = interrupted.load(),
                      .took = std::chrono::duration_cast<std::chrono::seconds>(Clock::now() - began),
-                     .benchmarks = plan.size()};
+                     .benchmarks = plan.size(),
+                     .suites = only.empty() || only == ",," ? "" : selected};
   const auto written = write_report(out, results, measured, machine, info);
   std::cout << written.headline << "\nReport: " << (out / "summary.md").string() << " (" << results.figures.size()
             << " figures in figures.csv";

@@ -171,6 +171,24 @@ std::vector<std::string> write_plots(const std::filesystem::path& dir, const Res
       lines_plot(plots, "sleeping", scenario_series("sleeping-", "hz"),
                  "set logscale xy\nset xlabel 'rate (Hz)'\nset ylabel 'publish to receive (ns)'\n"));
 
+  // The 1 kHz loop: the percentiles of each run's lateness and end to end,
+  // idle and under load.
+  for (const auto& [kind, title] : {std::pair{"lateness", "1 kHz loop: wake-up lateness"},
+                                    std::pair{"e2e", "1 kHz loop: end to end, publish to the subscriber holding it"}}) {
+    std::vector<Series> series;
+    for (const auto& [load, text] : {std::pair{"idle", " idle"}, std::pair{"load", " under load"}})
+      for (auto s : distribution(r, std::string{"loop-"} + kind + "-" + load, 0)) {
+        s.title += text;
+        series.push_back(std::move(s));
+      }
+    const std::string name = std::string{"loop-"} + kind;
+    add(name, title,
+        lines_plot(plots, name, series,
+                   "set logscale y\nset xtics ('p50' 0.301, 'p90' 1, 'p99' 2, 'p99.9' 3, 'max' 4)\n"
+                   "set xrange [0.2:4.1]\nset xlabel 'percentile'\nset ylabel '" +
+                       std::string{kind} + " (ns)'\n"));
+  }
+
   // Table 1 as bars: ns per hop, a cluster per payload and width.
   {
     std::vector<std::string> who;

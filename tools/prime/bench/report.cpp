@@ -178,6 +178,67 @@ std::string fan_out_throughput_table(const Results& r) {
   return out.str();
 }
 
+// The 1 kHz loop (prime_ipc's loop suite), idle and under load: Prime's
+// wake-up lateness beside cyclictest's and the goal's ratio, end-to-end
+// latency beside iceoryx's; then how each run was scheduled.
+std::string loop_tables(const Results& r) {
+  const std::pair<const char*, const char*> kMachine[] = {{"idle", "idle"}, {"load", "under load (stress-ng)"}};
+  bool any = false;
+  for (const auto& [load, text] : kMachine) any = any || !r.who_in("loop-lateness-" + std::string{load}).empty();
+  if (!any) return "No figures.\n";
+  // "p50 / p99 / p99.9 / max" of who in scenario.
+  auto spread = [&](const std::string& who, const std::string& scenario) {
+    std::string text;
+    bool found = false;
+    for (const char* statistic : {"p50", "p99", "p99.9", "max"}) {
+      const auto v = r.find(who, scenario, 0, statistic);
+      found = found || v.has_value();
+      text += (text.empty() ? "" : " / ") + (v ? time_text(*v) : std::string{"–"});
+    }
+    return found ? text : std::string{"–"};
+  };
+  std::ostringstream out;
+  out << "| machine | Prime lateness | cyclictest lateness | Prime / cyclictest, p99 | hand-written loop lateness "
+         "(iceoryx's) | Prime end to end | iceoryx end to end | Prime / iceoryx, p99.9 |\n"
+         "|---|---:|---:|---:|---:|---:|---:|---:|\n";
+  std::vector<std::string> verdicts;
+  for (const auto& [load, text] : kMachine) {
+    const std::string lateness = "loop-lateness-" + std::string{load}, e2e = "loop-e2e-" + std::string{load};
+    const auto ratio = divide(r.find("Shm", lateness, 0, "p99"), r.find("Cyclictest", lateness, 0, "p99"));
+    out << "| " << text << " | " << spread("Shm", lateness) << " | " << spread("Cyclictest", lateness) << " | "
+        << ratio_text(ratio) << " | " << spread("Iceoryx", lateness) << " | " << spread("Shm", e2e) << " | "
+        << spread("Iceoryx", e2e) << " | "
+        << ratio_text(divide(r.find("Shm", e2e, 0, "p99.9"), r.find("Iceoryx", e2e, 0, "p99.9"))) << " |\n";
+    if (ratio) verdicts.push_back(std::string{text} + " " + ratio_text(ratio) + (*ratio <= 1.2 ? " (met)" : " (NOT met)"));
+  }
+  out << "\nEach cell: p50 / p99 / p99.9 / max. Goal: Prime's lateness p99 at most 1.2× cyclictest's: ";
+  for (std::size_t i = 0; i < verdicts.size(); ++i) out << (i ? "; " : "") << verdicts[i];
+  if (verdicts.empty()) out << "cyclictest was not measured (see Skipped), so no ratio";
+  out << ".\n\n";
+
+  out << "| run | machine | SCHED_FIFO priority | ticks | lost | machine's CPU time busy |\n|---|---|---:|---:|---:|---:|\n";
+  std::vector<std::string> refused;
+  for (const auto& [load, text] : kMachine)
+    for (const auto& who : ordered(r.who_in("loop-" + std::string{load}))) {
+      const std::string scenario = "loop-" + std::string{load};
+      const auto priority = r.find(who, scenario, 0, "priority");
+      const auto ticks = r.find(who, scenario, 0, "ticks");
+      const auto lost = r.find(who, scenario, 0, "lost");
+      const auto busy = r.find(who, scenario, 0, "busy");
+      out << "| " << who << " | " << text << " | "
+          << (priority ? (*priority > 0 ? number(*priority, "%.0f") : std::string{"normal (refused)"}) : "–") << " | "
+          << (ticks ? number(*ticks, "%.0f") : "–") << " | " << (lost ? number(*lost, "%.0f") : "–") << " | "
+          << (busy ? number(*busy * 100, "%.0f") + " %" : "–") << " |\n";
+      if (priority && *priority == 0) refused.push_back(who + " " + text);
+    }
+  if (!refused.empty()) {
+    out << "\n**The machine refused real-time priority** for ";
+    for (std::size_t i = 0; i < refused.size(); ++i) out << (i ? ", " : "") << refused[i];
+    out << ": those ran at normal priority (why: Notes, below).\n";
+  }
+  return out.str();
+}
+
 std::string table1_table(const Results& r) {
   std::vector<std::string> scenarios;
   for (const auto& f : r.figures)
@@ -420,6 +481,13 @@ std::string headline(const Results& r, const std::vector<Results>& rounds) {
       false, {{"1 reader", at("Shm", "fanout-publish-1", 64, "publish")}, {"cache-line floor", p50("Floor", "latency", 64)}});
   row("Shm service round trip, 64 B, p50", p50("ShmService", "round-trip", 64), false,
       {{"iceoryx request/response", p50("Iceoryx", "round-trip", 64)}, {"Unix socket", p50("UnixSocket", "round-trip", 64)}});
+  for (const auto& [load, text] : {std::pair{"idle", "idle"}, std::pair{"load", "under load"}})
+    row(std::string{"1 kHz loop (prime::every) wake-up lateness, p99, "} + text,
+        at("Shm", std::string{"loop-lateness-"} + load, 0, "p99"), false,
+        {{"cyclictest (goal: at most 1.2×)", at("Cyclictest", std::string{"loop-lateness-"} + load, 0, "p99")},
+         {"a hand-written clock_nanosleep loop", at("Iceoryx", std::string{"loop-lateness-"} + load, 0, "p99")}});
+  row("1 kHz loop, Shm end to end (publish to the subscriber holding it), p99.9, under load",
+      at("Shm", "loop-e2e-load", 0, "p99.9"), false, {{"iceoryx", at("Iceoryx", "loop-e2e-load", 0, "p99.9")}});
   // Each Table 1 comparison at its worst row in the medians, and that row's range.
   auto table1_row = [&](const std::string& what, const std::string& who, const RowRatio& ratio, bool largest) {
     if (const auto row = worst_table1_row(r, who, ratio, largest))
@@ -490,7 +558,8 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
      << "Measured " << machine.date << " on " << machine.cpu << " (" << machine.cpus << " CPUs, " << machine.memory
      << "), " << machine.kernel << ". " << (info.quick ? "Quick run" : "Full run") << ": " << info.benchmarks
      << " benchmarks in " << minutes << " min " << seconds << " s" << (info.interrupted ? ", INTERRUPTED (partial)" : "")
-     << ". Reproduce with `prime bench" << (info.quick ? " --quick" : "") << "`.\n\n"
+     << ". Reproduce with `" << (info.suites.empty() ? "" : "PRIME_BENCH_SUITES=" + info.suites + " ") << "prime bench"
+     << (info.quick ? " --quick" : "") << "`.\n\n"
      << (info.quick ? "Each figure is from one short run (noisy: use the full run for numbers to quote). "
                     : "Each figure is the median of 3 runs, taken in three rounds over every benchmark, so that a "
                       "figure and the floor or peer it is compared with were measured across the same stretch of the "
@@ -549,6 +618,22 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
   image("sleeping", "sleeping subscribers");
   md << scenarios_table(results) << '\n';
   md << "### Fan-out throughput\n\n" << fan_out_throughput_table(results) << '\n';
+  md << "## 1 kHz loop: wake-up lateness and end to end\n\n"
+     << "A 1 kHz `prime::every` loop on a Shm core publishes a small stamped sample each tick to a subscriber in "
+        "another process, both at one SCHED_FIFO priority (80, or PRIME_LOOP_PRIORITY; the table of runs says what "
+        "each got), the loop on the first CPU and the subscriber on the second; the same loop written by hand for "
+        "iceoryx (a thread sleeping in `clock_nanosleep(TIMER_ABSTIME)`, a subscriber asleep in a WaitSet); and "
+        "cyclictest, the floor, at the same period and priority on the loop's CPU. The three take turns in slices "
+        "of 1000 ticks (1 s), round after round, and each one's figures pool its slices: all three are measured "
+        "across the same stretch of the machine's state. Once idle (no load of the run's own: the last table says "
+        "how busy others kept the machine) and once under load (stress-ng, one CPU hog per CPU, for the run only). "
+        "Lateness: from a tick's time to the loop's code running, as cyclictest measures it. End to end: from the "
+        "stamp, the clock read once the sample is written into its loan, just before it is published, to the "
+        "subscriber holding it. Every run locks its memory and holds /dev/cpu_dma_latency at 0, as cyclictest "
+        "does; the first 100 ticks of each slice are not counted; a tick a late one let pass is skipped, not run.\n\n";
+  image("loop-lateness", "1 kHz loop lateness percentiles");
+  image("loop-e2e", "1 kHz loop end-to-end percentiles");
+  md << loop_tables(results) << '\n';
   md << "## Table 1: chains in one process\n\n";
   image("table1", "Table 1");
   md << table1_table(results) << '\n';
@@ -556,6 +641,11 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
   image("optimus", "Optimus against hiredis");
   md << optimus_table(results) << '\n';
   md << "## Services under load (after the communication-architecture paper)\n\n" << availability_tables(results) << '\n';
+  if (!results.notes.empty()) {
+    md << "## Notes\n\n";
+    for (const auto& note : results.notes) md << "- " << note << '\n';
+    md << '\n';
+  }
   md << "## Skipped\n\n";
   if (results.skipped.empty() && written.plot_problem.empty()) md << "Nothing.\n";
   for (const auto& s : results.skipped)

@@ -25,6 +25,7 @@ struct RunInfo {
   bool interrupted = false;
   std::chrono::seconds took{};
   std::size_t benchmarks = 0;
+  std::string suites;  // $PRIME_BENCH_SUITES, when only those ran
 };
 
 struct Written {

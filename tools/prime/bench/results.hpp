@@ -31,6 +31,9 @@ struct Skipped {
 struct Results {
   std::vector<Figure> figures;
   std::vector<Skipped> skipped;
+  // What the report must say of how a benchmark ran (a real-time priority
+  // the machine refused, say), each once.
+  std::vector<std::string> notes;
 
   [[nodiscard]] std::optional<double> find(const std::string& who, const std::string& scenario, std::int64_t payload,
                                            const std::string& statistic) const {
@@ -85,9 +88,10 @@ inline std::optional<Range> range_over(const std::vector<Results>& rounds, const
 // beat, and the peers a user would pick instead.
 // The SPSC rings (SpscFloor, and those that carry a header with each
 // payload: SpscInline, SpscRecords, SpscRecordsHeaders, SpscShmLayout) are
-// floors: what the hardware moves for their layout, nothing else done.
+// floors: what the hardware moves for their layout, nothing else done; so is
+// cyclictest, the least a periodic loop's wake-up can be late.
 inline bool is_floor(const std::string& who) {
-  return who == "Floor" || who == "FutexWake" || who.starts_with("Spsc");
+  return who == "Floor" || who == "FutexWake" || who.starts_with("Spsc") || who == "Cyclictest";
 }
 inline bool is_prime(const std::string& who) {
   return who.starts_with("Shm") || who == "Optimus" || who == "Radiant" || who == "Liberty" || who.starts_with("Sources");

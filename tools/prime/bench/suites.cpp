@@ -1,5 +1,6 @@
 #include "suites.hpp"
 
+#include <algorithm>
 #include <cctype>
 #include <cstdint>
 #include <cstdlib>
@@ -147,6 +148,53 @@ void read_availability(const Json& run, Results& out) {
   }
 }
 
+// prime_ipc's loop suite: BM_Loop/load:<0|1>, whose counters are, for
+// <who> of shm, iceoryx and cyclictest, <who>_lateness_<p50|p99|p999|max>_ns,
+// <who>_e2e_..._ns (not cyclictest), <who>_ticks, _lost, _busy and
+// _priority (0: the machine refused a real-time one); its label says how
+// each ran, "<Who>: ..." joined by " | ". One that did not run is listed as
+// skipped, one that ran at normal priority in the notes, each with why.
+void read_loop(const Json& run, Results& out) {
+  const auto parts = name_parts(run);
+  if (parts.size() < 2 || parts[0] != "Loop") return;
+  const std::string load = parts[1] == "load:1" ? "load" : "idle";
+  static const std::pair<const char*, const char*> kWho[] = {
+      {"shm", "Shm"}, {"iceoryx", "Iceoryx"}, {"cyclictest", "Cyclictest"}};
+  static const std::pair<const char*, const char*> kStatistics[] = {
+      {"p50", "p50"}, {"p99", "p99"}, {"p999", "p99.9"}, {"max", "max"}};
+  static const std::pair<const char*, const char*> kRun[] = {
+      {"ticks", "ticks"}, {"lost", "samples"}, {"busy", "fraction"}, {"priority", "SCHED_FIFO"}};
+  for (const auto& [prefix, who] : kWho) {
+    for (const std::string kind : {"lateness", "e2e"})
+      for (const auto& [key, statistic] : kStatistics)
+        if (const double* v = number(run, std::string{prefix} + "_" + kind + "_" + key + "_ns"))
+          out.figures.push_back({who, "loop-" + kind + "-" + load, 0, statistic, *v, "ns"});
+    for (const auto& [statistic, unit] : kRun)
+      if (const double* v = number(run, std::string{prefix} + "_" + statistic))
+        out.figures.push_back({who, "loop-" + load, 0, statistic, *v, unit});
+  }
+  const auto& object = run.object();
+  const auto label = object.find("label");
+  if (label == object.end() || !std::holds_alternative<std::string>(label->second.value)) return;
+  const std::string& text = std::get<std::string>(label->second.value);
+  for (std::size_t from = 0; from < text.size();) {
+    const auto bar = std::min(text.find(" | ", from), text.size());
+    const std::string part = text.substr(from, bar - from);
+    from = bar + 3;
+    const auto colon = part.find(": ");
+    if (colon == std::string::npos) continue;
+    const std::string who = part.substr(0, colon), how = part.substr(colon + 2);
+    if (how.starts_with("not run: ")) {
+      out.skipped.push_back({"loop", "BM_Loop/" + parts[1] + " " + who, how.substr(9)});
+      continue;
+    }
+    std::string prefix = who;
+    std::transform(prefix.begin(), prefix.end(), prefix.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (const double* priority = number(run, prefix + "_priority"); priority && *priority == 0)
+      out.notes.push_back(who + ", " + (load == "load" ? "under load" : "idle") + ": ran at " + how);
+  }
+}
+
 }  // namespace
 
 const double* number(const Json& object, const std::string& key) {
@@ -163,6 +211,7 @@ std::vector<Suite> suites() {
        .binary = "ipc/prime_ipc",
        .quick_filter = "^BM_(Latency|Throughput|RoundTrip|PublisherAlone)_[A-Za-z]+[0-9]*/(64|1048576)/"
                        "|^BM_Calls_ShmService/1/|^BM_FanOut(Throughput|Publish)?_Shm/[14]/|^BM_Loaded_|^BM_Sleeping_Shm/1000/",
+       .full_filter = "-^BM_Loop/",  // the loop suite's, below
        .quick_min_time = 0.05,
        .full_min_time = 0.2,
        .full_repetitions = 3,
@@ -195,6 +244,20 @@ std::vector<Suite> suites() {
        .full_repetitions = 1,
        .quick_env = {{"PRIME_AVAILABILITY_REQUESTS", "40"}},
        .read = read_availability},
+      // Two benchmarks (idle, under load), each running the three loops in
+      // turn for 10 s of ticks apiece (0.5 s quick), once: the load keeps
+      // stress-ng on every CPU for that long, and the machine may be shared.
+      {.name = "loop",
+       .title = "a 1 kHz loop publishing to another process, idle and under stress-ng, beside cyclictest",
+       .binary = "ipc/prime_ipc",
+       .quick_filter = "^BM_Loop/",
+       .full_filter = "^BM_Loop/",
+       .quick_min_time = 0.01,  // each runs once, for a fixed number of ticks
+       .full_min_time = 0.01,
+       .full_repetitions = 1,
+       .needs = {"cyclictest", "stress-ng"},
+       .quick_env = {{"PRIME_LOOP_SECONDS", "0.5"}},
+       .read = read_loop},
   };
 }
 
