@@ -4,7 +4,6 @@
 #include <array>
 #include <chrono>
 #include <cstddef>
-#include <deque>
 #include <initializer_list>
 #include <memory>
 #include <mutex>
@@ -111,6 +110,36 @@ struct Synced : std::tuple<Ts...> {
 
 namespace detail {
 
+// The values of one input waiting for a match: a ring of `capacity`, made
+// once, so that a sync in steady state allocates nothing (a std::deque
+// takes and frees a node every few values).
+template <class T>
+class WaitingValues {
+ public:
+  explicit WaitingValues(std::size_t capacity = 1) : slots_(std::max<std::size_t>(capacity, 1)) {}
+
+  [[nodiscard]] std::size_t size() const noexcept { return size_; }
+  [[nodiscard]] bool empty() const noexcept { return size_ == 0; }
+  [[nodiscard]] Sample<T>& operator[](std::size_t i) noexcept { return *slots_[(head_ + i) % slots_.size()]; }
+  [[nodiscard]] const Sample<T>& operator[](std::size_t i) const noexcept { return *slots_[(head_ + i) % slots_.size()]; }
+  [[nodiscard]] Sample<T>& front() noexcept { return (*this)[0]; }
+  // Adds a value at the back; there must be room (size() < capacity).
+  void push_back(Sample<T>&& sample) {
+    slots_[(head_ + size_) % slots_.size()].emplace(std::move(sample));
+    ++size_;
+  }
+  void pop_front() noexcept {
+    slots_[head_].reset();
+    head_ = (head_ + 1) % slots_.size();
+    --size_;
+  }
+
+ private:
+  std::vector<std::optional<Sample<T>>> slots_;
+  std::size_t head_ = 0;
+  std::size_t size_ = 0;
+};
+
 // Matches the values of N sources by stamp (stamps rise per source) and
 // publishes each match as a tuple. Every input's worker offers into it.
 //
@@ -125,8 +154,12 @@ class Synchronizer {
 
   // `depths`: how many values of each input may wait for a match.
   Synchronizer(SyncPolicy policy, std::array<std::size_t, kInputs> depths, LocalSource<Tuple> out)
-      : policy_{policy}, depths_{depths}, out_{std::move(out)} {
+      : policy_{policy},
+        depths_{depths},
+        out_{std::move(out)},
+        queues_{waiting(depths, std::make_index_sequence<kInputs>{})} {
     earliest_next_.fill(Clock::time_point::min());
+    for (std::size_t i = 0; i < kInputs; ++i) stamps_[i].reserve(depths[i]);
   }
 
   template <std::size_t I>
@@ -150,6 +183,11 @@ class Synchronizer {
   }
 
  private:
+  template <std::size_t... I>
+  static std::tuple<WaitingValues<Ts>...> waiting(const std::array<std::size_t, kInputs>& depths, std::index_sequence<I...>) {
+    return {WaitingValues<Ts>{depths[I]}...};
+  }
+
   template <std::size_t... I>
   void publish_latest(Clock::time_point stamp, std::stop_token& stop, std::index_sequence<I...>) {
     if (!(std::get<I>(latest_).has_value() && ...)) return;
@@ -214,7 +252,7 @@ class Synchronizer {
   template <class Q>
   static void stamps_of(const Q& queue, std::vector<Clock::time_point>& stamps) {
     stamps.clear();
-    for (const auto& s : queue) stamps.push_back(s.stamp);
+    for (std::size_t i = 0; i < queue.size(); ++i) stamps.push_back(queue[i].stamp);
   }
   template <class Q>
   static void drop_front(Q& queue, std::size_t n) {
@@ -238,7 +276,7 @@ class Synchronizer {
   LocalSource<Tuple> out_;
   std::mutex mutex_;
   std::tuple<std::optional<Sample<Ts>>...> latest_;
-  std::tuple<std::deque<Sample<Ts>>...> queues_;
+  std::tuple<WaitingValues<Ts>...> queues_;
   std::array<Clock::time_point, kInputs> earliest_next_{};  // where each input's next value could lie at the earliest
   std::array<Clock::time_point, kInputs> taken_{};          // the stamps of the set being made
   std::array<std::vector<Clock::time_point>, kInputs> stamps_;  // approximate_time: each queue's stamps, for the matcher

@@ -291,6 +291,10 @@ class Server {
     // Kept only for entries the registry names: a hop is read from shared
     // memory, and the map must not grow with every value a caller writes.
     auto found = next_.find(hop.service);
+    // The segment the hop's caller holds its cell in, mapped already: no
+    // look at the name (a path and two system calls) on each call.
+    if (found != next_.end() && found->second && found->second->header().incarnation == hop.incarnation)
+      return found->second.get();
     if (found == next_.end() || !found->second || !found->second->current()) {
       const auto name = service_->registry().name_at(hop.service, EndpointKind::service);
       if (!name) return nullptr;
