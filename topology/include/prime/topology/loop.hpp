@@ -293,7 +293,8 @@ class Loop {
 //
 // Throws Errc::invalid_argument for a period or deadline that is not
 // positive, a phase not within the period, a priority out of range; Errc::stopped when
-// the core is stopping.
+// the core is stopping; Errc::domain_full when a medium that shows its loops
+// to tools has no room for another (Shm: 64 per domain).
 template <Medium M, class C>
   requires std::invocable<C&, Token>
 [[nodiscard]] Loop every(M& core, Clock::duration period, C chain, LoopOptions options = {}) {
