@@ -1,17 +1,13 @@
 #pragma once
 
-#include <algorithm>
-#include <cstring>
-#include <filesystem>
-#include <optional>
-#include <sys/stat.h>
+#include <sys/types.h>
 #include <unistd.h>
+
+#include <cstddef>
+#include <optional>
 #include <string>
 #include <vector>
 
-#include "prime/shm/detail/registry.hpp"
-#include "prime/shm/detail/segment.hpp"
-#include "prime/shm/detail/snapshot.hpp"
 #include "prime/shm/registry.hpp"
 
 namespace prime::shm {
@@ -31,11 +27,7 @@ struct DomainSummary {
 
 // What domain `domain` holds now, or nothing when it does not exist. Its
 // registry is read only when `owner` (this user by default) made it.
-[[nodiscard]] inline std::optional<RegistrySnapshot> inspect(const std::string& domain, uid_t owner = ::geteuid()) {
-  auto registry = detail::Registry::watch(domain, owner);
-  if (!registry) return std::nullopt;
-  return detail::snapshot(registry);
-}
+[[nodiscard]] std::optional<RegistrySnapshot> inspect(const std::string& domain, uid_t owner = ::geteuid());
 
 // Who set domain `domain` up and whom its segments admit: the owner and
 // permission bits of its registry, or nothing when it does not exist. A
@@ -46,68 +38,17 @@ struct DomainAccess {
   uid_t owner = 0;
   unsigned permissions = 0;
 };
-[[nodiscard]] inline std::optional<DomainAccess> access_of(const std::string& domain) {
-  struct stat st {};
-  const auto path = std::string{detail::kShmDirectory} + "/" + detail::segment_name(domain, "registry", "");
-  if (::lstat(path.c_str(), &st) != 0) return std::nullopt;
-  return DomainAccess{.owner = st.st_uid, .permissions = static_cast<unsigned>(st.st_mode & 07777)};
-}
+[[nodiscard]] std::optional<DomainAccess> access_of(const std::string& domain);
 
 // The domains whose registry lies in /dev/shm, alive or dead; one this
 // process may not read is listed with the reason.
-[[nodiscard]] inline std::vector<DomainSummary> domains() {
-  std::vector<DomainSummary> found;
-  std::error_code ignored;
-  for (const auto& entry : std::filesystem::directory_iterator{detail::kShmDirectory, ignored}) {
-    const auto file = entry.path().filename().string();
-    const std::string suffix = ".registry.";
-    if (!file.starts_with("prime.") || !file.ends_with(suffix)) continue;
-    const auto domain = detail::unescape(file.substr(6, file.size() - 6 - suffix.size()));
-    std::optional<RegistrySnapshot> snapshot;
-    try {
-      snapshot = inspect(domain);
-    } catch (const Failure& f) {
-      found.push_back({.name = domain, .unreadable = f.error().message});
-      continue;
-    }
-    if (!snapshot) continue;
-    DomainSummary d{.name = domain};
-    for (const auto& p : snapshot->participants) (p.alive ? d.participants_alive : d.participants_dead) += 1;
-    d.topics = snapshot->topics.size();
-    d.services = snapshot->services.size();
-    found.push_back(std::move(d));
-  }
-  std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
-  return found;
-}
+[[nodiscard]] std::vector<DomainSummary> domains();
 
 // What dead participants left in `domain`: of a domain no one lives in,
 // every segment (removed); of a live one, their registry entries and slots
 // (freed: nothing of a live participant is touched). Says what it did, a
 // line each ("removed <path>"; "could not remove <path>: <why>" for a
 // segment that stayed); nothing when there was nothing to do.
-inline std::vector<std::string> clean(const std::string& domain) {
-  auto registry = detail::Registry::watch(domain);
-  if (!registry) return {};
-  std::vector<std::string> done;
-  for (const auto& [name, why] : registry->remove_if_dead())
-    done.push_back(why.empty() ? "removed /dev/shm/" + name : "could not remove /dev/shm/" + name + ": " + why);
-  if (!done.empty()) return done;
-  const auto before = registry->participants();
-  // Slots are cleared by a participant, whose lease tells the others it is
-  // at work: this tool joins the domain while it clears them.
-  std::shared_ptr<detail::Registry> member;
-  try {
-    member = detail::Registry::join(domain, registry->access(), "prime clean", true);
-  } catch (const Failure& f) {
-    if (f.error().code == Errc::not_found) return clean(domain);  // its last process exited meanwhile
-    throw;
-  }
-  const auto freed = detail::reclaim(member);
-  for (const auto& p : before)
-    if (!p.alive) done.push_back("forgot dead participant '" + p.name + "' (pid " + std::to_string(p.pid) + ")");
-  if (freed > 0) done.push_back("freed " + std::to_string(freed) + " subscriber and client slots of dead participants");
-  return done;
-}
+std::vector<std::string> clean(const std::string& domain);
 
 }  // namespace prime::shm

@@ -3,6 +3,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <string>
 
@@ -210,9 +211,12 @@ inline constexpr std::uint64_t kMaxSegmentBytes = 1ull << 46;
 // as its size only (tools then show bytes).
 template <std::size_t N>
 void write_schema(char (&to)[N], const std::string& schema, std::size_t size) {
-  const auto text = schema.size() < N ? schema : "?" + std::to_string(size);
-  std::memcpy(to, text.data(), text.size());
-  to[text.size()] = '\0';
+  if (schema.size() < N) {
+    std::memcpy(to, schema.data(), schema.size());
+    to[schema.size()] = '\0';
+  } else {
+    std::snprintf(to, N, "?%zu", size);
+  }
 }
 
 // Where the parts of a topic's segment lie, from its QoS and message size.

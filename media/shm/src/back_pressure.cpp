@@ -1,0 +1,34 @@
+// A `block` publisher giving up on subscribers that took nothing for its
+// block timeout (the wait itself stays inline in back_pressure.hpp).
+#include "prime/shm/detail/back_pressure.hpp"
+
+#include <algorithm>
+#include <string>
+
+namespace prime::shm::detail {
+
+void BackPressure::give_up_on_laggards(std::uint64_t needed, std::uint64_t next, std::span<const std::uint32_t> in_ring) {
+  auto& h = topic_->header();
+  const auto& g = topic_->geometry();
+  for (std::size_t i = 0; i < g.max_subscribers; ++i) {
+    auto& slot = h.subscribers[i];
+    if (slot.cursor.load() >= needed || slot.lagging.load() != kWaitedFor) continue;
+    slot.lagging.store(kPinning, std::memory_order_seq_cst);
+    const auto from = slot.cursor.load(std::memory_order_seq_cst);
+    const auto to = slot.kept_end.load(std::memory_order_seq_cst);
+    if (from != kNoCursor)
+      for (auto seq = std::max(from, next > g.capacity ? next - g.capacity : 0); seq < std::min(to, next); ++seq)
+        if (const auto chunk = in_ring[topic_->ring_index(seq)]; chunk != kNoChunk)
+          topic_->chunk(chunk).holders.fetch_or(1ull << i, std::memory_order_seq_cst);
+    slot.lagging.store(kPassedOver, std::memory_order_seq_cst);
+    if (report_)
+      report_(Error{Errc::overflow, "topic '" + topic_->name() + "': subscriber " +
+                                        topic_->registry().describe(slot.owner.load()) + " read nothing for " +
+                                        std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(block_timeout_).count()) +
+                                        " ms; the publisher stops waiting for it until it catches up, and it loses "
+                                        "what is overwritten before it reads it"});
+  }
+  look_again(next);
+}
+
+}  // namespace prime::shm::detail
