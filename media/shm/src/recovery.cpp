@@ -1,5 +1,5 @@
 // A publisher taking over a topic whose publisher died.
-#include "prime/shm/detail/recovery.hpp"
+#include "recovery.hpp"
 
 #include <algorithm>
 #include <cstdint>

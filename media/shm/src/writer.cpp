@@ -3,7 +3,7 @@
 // writer.hpp.
 #include "prime/shm/detail/writer.hpp"
 
-#include "prime/shm/detail/recovery.hpp"
+#include "recovery.hpp"
 
 namespace prime::shm::detail {
 

@@ -27,7 +27,7 @@ namespace prime::shm::detail {
 
 // The publishing side of a topic: its one live publisher. A publisher that
 // finds the previous one dead takes the topic over where it stopped
-// (recovery.hpp). Its chunks come from a ChunkPool; under `block`, its
+// (src/recovery.hpp). Its chunks come from a ChunkPool; under `block`, its
 // loans wait for the subscribers by BackPressure. What is its own: the
 // ring entries, sizes and stamps it writes, the head and its fence, and
 // the wake.
@@ -166,7 +166,7 @@ class Writer {
   // a sleeping one looks at; store_head orders it before the look for
   // sleepers), so a subscriber that sees the head finds the entry, and a
   // publisher killed in between leaves a head no later than the ring (see
-  // recovery.hpp). Then the chunk the entry pushed out of the ring is let
+  // src/recovery.hpp). Then the chunk the entry pushed out of the ring is let
   // go: after a full head store, evicted at once, as a batch's are (the
   // store's fence serves the eviction); after a light one, with others
   // later (ChunkPool::leave).
