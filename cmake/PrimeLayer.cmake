@@ -22,7 +22,7 @@ function(prime_header_layer name)
 endfunction()
 
 # prime_compiled_layer(<name> SOURCES <files>... ABI <n> [EXPORT <export-set>]
-#                      [INSTALL_DETAIL] [LINKS <targets>...]
+#                      [LINKS <targets>...]
 #                      [BUILD_LINKS <targets>...] [PRIVATE_LINKS <targets>...])
 # A compiled Prime medium: `prime::<name>` (shared, libprime_<name>.so.<n>)
 # and `prime::<name>_static` (static, libprime_<name>.a), from one set of
@@ -32,10 +32,9 @@ endfunction()
 # them. PRIVATE_LINKS are linked into the library, not into its users'
 # compilations (the static library's users link them too). <n> is the
 # library's ABI version (SOVERSION). Headers under include/.../detail/ are
-# the library's own and are not installed, unless INSTALL_DETAIL says the
-# public headers still include some.
+# the library's own and are not installed: no public header includes them.
 function(prime_compiled_layer name)
-  cmake_parse_arguments(PARSE_ARGV 1 arg "INSTALL_DETAIL" "EXPORT;ABI" "SOURCES;LINKS;BUILD_LINKS;PRIVATE_LINKS")
+  cmake_parse_arguments(PARSE_ARGV 1 arg "" "EXPORT;ABI" "SOURCES;LINKS;BUILD_LINKS;PRIVATE_LINKS")
   if(NOT arg_EXPORT)
     set(arg_EXPORT primeTargets)
   endif()
@@ -65,11 +64,7 @@ function(prime_compiled_layer name)
     install(TARGETS ${target} EXPORT ${arg_EXPORT}
             LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR} ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR})
   endforeach()
-  if(arg_INSTALL_DETAIL)
-    install(DIRECTORY include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
-  else()
-    install(DIRECTORY include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR} PATTERN detail EXCLUDE)
-  endif()
+  install(DIRECTORY include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR} PATTERN detail EXCLUDE)
 endfunction()
 
 # prime_abi(<var> <header> <constant>): the number `<constant> = <n>` sets

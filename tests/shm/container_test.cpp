@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "prime/shm.hpp"
+#include "prime/shm/detail/registry.hpp"
 #include "shm/domain.hpp"
 #include "shm/mapped_topic.hpp"
 #include "shm/messages.hpp"

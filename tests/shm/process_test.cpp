@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "prime/shm.hpp"
+#include "prime/shm/detail/asymmetric_fence.hpp"
 #include "shm/domain.hpp"
 #include "shm/mappings.hpp"
 #include "shm/mapped_topic.hpp"

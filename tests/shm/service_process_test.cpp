@@ -16,6 +16,7 @@
 
 #include "prime/liberty.hpp"
 #include "prime/shm.hpp"
+#include "prime/shm/detail/service_layout.hpp"
 #include "shm/domain.hpp"
 #include "shm/mapped_topic.hpp"
 #include "shm/messages.hpp"

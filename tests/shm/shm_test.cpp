@@ -18,6 +18,8 @@
 
 #include "prime/liberty.hpp"
 #include "prime/shm.hpp"
+#include "prime/shm/detail/registry.hpp"
+#include "prime/shm/detail/topic.hpp"
 #include "shm/domain.hpp"
 #include "shm/mappings.hpp"
 #include "shm/mapped_topic.hpp"

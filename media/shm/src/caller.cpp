@@ -139,8 +139,7 @@ void Binding::unbind() {
   release_slot(true);
 }
 
-std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding>>& route, const RequestWriter& write,
-                                const std::function<void(const std::byte*, std::size_t)>& read, bool posted) {
+std::expected<void, Error> call(const Route& route, const RequestWriter& write, const ReplyReader& read, bool posted) {
   struct Held {
     std::shared_ptr<Service> service;
     std::size_t cell = 0;
@@ -267,6 +266,20 @@ std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding>>& rou
   }
   release_all();
   return result;
+}
+
+Route linked(const Route& first, const Route& second) {
+  const auto& out = first.back();
+  const auto& in = second.front();
+  if (!forwards_into(out->reply(), in->request()))
+    throw Failure{{Errc::type_mismatch, "cannot link service '" + out->name() + "', which gives " + out->reply().describe() +
+                                            ", to service '" + in->name() + "', which takes " + in->request().describe()}};
+  auto route = first;
+  route.insert(route.end(), second.begin(), second.end());
+  if (route.size() > kMaxHops)
+    throw Failure{{Errc::invalid_argument, "a linked call goes through at most " + std::to_string(kMaxHops) +
+                                             " services, not " + std::to_string(route.size())}};
+  return route;
 }
 
 }  // namespace prime::shm::detail

@@ -1,7 +1,7 @@
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
-#include <fstream>
 #include <functional>
 #include <map>
 #include <span>
@@ -15,12 +15,6 @@
 #include "prime/common/schema.hpp"
 #include "prime/logic/error.hpp"
 #include "prime/logic/event.hpp"
-#include "prime/shm/detail/layout.hpp"
-#include "prime/shm/detail/registry.hpp"
-#include "prime/shm/detail/server.hpp"
-#include "prime/shm/detail/snapshot.hpp"
-#include "prime/shm/detail/service.hpp"
-#include "prime/shm/detail/topic.hpp"
 #include "prime/shm/message.hpp"
 #include "prime/shm/publisher.hpp"
 #include "prime/shm/qos.hpp"
@@ -34,48 +28,12 @@ namespace prime::shm {
 
 namespace detail {
 
-// `qos` with its defaults filled in for messages of type `type`, or a
-// Failure naming the topic and what is wrong.
-inline TopicQos complete(const std::string& name, const Fingerprint& type, bool raw, TopicQos qos) {
-  auto refuse = [&](const std::string& why) { throw Failure{{Errc::invalid_argument, "topic '" + name + "': " + why}}; };
-  if (raw && qos.max_message_size == 0) refuse("a raw byte topic needs max_message_size");
-  if (qos.max_message_size == 0) qos.max_message_size = type.size;
-  if (qos.max_message_size < type.size)
-    refuse("max_message_size " + std::to_string(qos.max_message_size) + " is smaller than " + type.describe());
-  const TopicGeometry geometry{qos.capacity, qos.max_message_size, qos.max_subscribers, qos.max_held};
-  if (const auto what = geometry.out_of_bounds(); !what.empty()) refuse("QoS out of bounds: " + what);
-  return qos;
-}
+class Registry;  // the domain's registry, mapped (compiled in libprime_shm)
+class Topic;     // a topic's segment, mapped (compiled in libprime_shm)
 
-// `qos` with its defaults filled in for a service of `request` and `reply`,
-// or a Failure naming the service and what is wrong.
-inline ServiceQos complete(const std::string& name, const Fingerprint& request, bool raw_request, const Fingerprint& reply,
-                           bool raw_reply, ServiceQos qos) {
-  auto refuse = [&](const std::string& why) { throw Failure{{Errc::invalid_argument, "service '" + name + "': " + why}}; };
-  if (raw_request && qos.max_request_size == 0) refuse("raw byte requests need max_request_size");
-  if (raw_reply && qos.max_reply_size == 0) refuse("raw byte replies need max_reply_size");
-  if (qos.max_request_size == 0) qos.max_request_size = request.size;
-  if (qos.max_reply_size == 0) qos.max_reply_size = reply.size;
-  if (qos.max_request_size < request.size) refuse("max_request_size is smaller than " + request.describe());
-  if (qos.max_reply_size < reply.size) refuse("max_reply_size is smaller than " + reply.describe());
-  if (qos.workers == 0 || qos.workers > kMaxWorkers)
-    refuse("workers must be in [1, " + std::to_string(kMaxWorkers) + "], not " + std::to_string(qos.workers));
-  const ServiceGeometry geometry{qos.max_request_size, qos.max_reply_size, qos.max_clients, qos.calls_per_client};
-  if (const auto what = geometry.out_of_bounds(); !what.empty()) refuse("QoS out of bounds: " + what);
-  if (qos.timeout <= std::chrono::milliseconds::zero()) refuse("the timeout must be positive");
-  return qos;
-}
-
-inline bool same_layout(const TopicQos& a, const TopicQos& b) {
-  return a.capacity == b.capacity && a.max_message_size == b.max_message_size && a.overflow == b.overflow &&
-         a.max_subscribers == b.max_subscribers && a.max_held == b.max_held;
-}
-
-inline std::string describe(const TopicQos& q) {
-  return "capacity " + std::to_string(q.capacity) + ", max_message_size " + std::to_string(q.max_message_size) +
-         ", overflow " + (q.overflow == Overflow::block ? "block" : "drop_oldest") + ", max_subscribers " +
-         std::to_string(q.max_subscribers) + ", max_held " + std::to_string(q.max_held);
-}
+// The bytes of /dev/shm a topic of `type` (`raw`: Bytes) with `qos` takes.
+// Throws Failure (Errc::invalid_argument) when the QoS is out of bounds.
+std::size_t topic_memory(const Fingerprint& type, bool raw, const TopicQos& qos);
 
 }  // namespace detail
 
@@ -83,8 +41,7 @@ inline std::string describe(const TopicQos& q) {
 // is created).
 template <Message T>
 [[nodiscard]] std::size_t topic_memory(const TopicQos& qos) {
-  const auto q = detail::complete("", Fingerprint::of<T>(), std::is_same_v<T, Bytes>, qos);
-  return detail::TopicGeometry{q.capacity, q.max_message_size, q.max_subscribers, q.max_held}.bytes();
+  return detail::topic_memory(Fingerprint::of<T>(), std::is_same_v<T, Bytes>, qos);
 }
 
 // One participant of a shared-memory domain: it publishes and subscribes to
@@ -102,16 +59,7 @@ template <Message T>
 // Thread-safe.
 class Core : public ErasedChainRuntime {
  public:
-  explicit Core(std::string domain, DomainOptions options = {})
-      : ErasedChainRuntime{"shm"},
-        registry_{detail::Registry::join(domain,
-                                         {.permissions = options.permissions,
-                                          .owner = options.owner.value_or(::geteuid()),
-                                          .prefault = options.prefault},
-                                         options.participant.empty() ? program_name() : options.participant,
-                                         options.only_if_alive)} {
-    reclaim();
-  }
+  explicit Core(std::string domain, DomainOptions options = {});
   ~Core() { stop(); }
   using ErasedChainRuntime::chain;  // this process's own chains, beside the service handles below
 
@@ -122,7 +70,7 @@ class Core : public ErasedChainRuntime {
   // (Errc::no_space).
   template <Message T>
   [[nodiscard]] Publisher<T> publisher(const std::string& name, TopicQos qos = {}) {
-    auto topic = open<T>(name, qos, "publisher");
+    auto topic = open<T>(name, qos, "publisher").topic;
     return Publisher<T>{std::move(topic), qos.block_timeout, qos.publish_fence, [runtime = runtime()](Error e) {
                           if (auto r = runtime.lock()) r->report(std::move(e));
                         }};
@@ -132,9 +80,9 @@ class Core : public ErasedChainRuntime {
   // with `topic_qos` if no one has opened it yet. Throws as publisher() does.
   template <Message T>
   [[nodiscard]] Subscription<T> subscribe(const std::string& name, SubscribeQos qos = {}, TopicQos topic_qos = {}) {
-    auto topic = open<T>(name, topic_qos, "subscriber");
-    if (qos.history > topic->header().capacity) qos.history = topic->header().capacity;
-    return Subscription<T>{std::move(topic), qos, runtime(), Graph::node(name, "source", "shm")};
+    auto opened = open<T>(name, topic_qos, "subscriber");
+    qos.history = std::min<std::size_t>(qos.history, opened.capacity);
+    return Subscription<T>{std::move(opened.topic), qos, runtime(), Graph::node(name, "source", "shm")};
   }
 
   // A source of what `event` raises from now on, carried by the domain's
@@ -163,7 +111,7 @@ class Core : public ErasedChainRuntime {
       if (auto sent = feed->publisher.publish(s.value, s.stamp); !sent)
         if (auto r = runtime.lock()) r->report(std::move(sent.error()));
     });
-    auto topic_handle = open<T>(name, topic, "source");
+    auto topic_handle = open<T>(name, topic, "source").topic;
     return Subscription<T>{std::move(topic_handle), {.spin = qos.spin}, runtime(), Graph::node(name, "source", "shm"),
                            std::move(feed)};
   }
@@ -231,68 +179,41 @@ class Core : public ErasedChainRuntime {
   // second. See ServiceChain for how a call fails.
   template <Message In, Message Out>
   [[nodiscard]] ServiceChain<In, Out> chain(const std::string& name, ClientQos qos = {}) {
-    auto binding = std::make_shared<detail::Binding>(registry_, name, Fingerprint::of<In>(), Fingerprint::of<Out>(), qos);
-    return {{std::move(binding)}, Graph::node(name, "service", "shm")};
+    return {bind(name, Fingerprint::of<In>(), Fingerprint::of<Out>(), qos), Graph::node(name, "service", "shm")};
   }
 
   // The domain's participants, topics, services and loops as they are now.
-  [[nodiscard]] RegistrySnapshot registry() { return detail::snapshot(registry_); }
+  [[nodiscard]] RegistrySnapshot registry();
 
   // Reclaims what dead participants left behind: their registry entries,
   // their subscriber slots and the samples those held, their client slots
   // of services and the calls those had in flight. Publishers and idle
   // services also do this, and each participant does it on joining. Returns
   // the subscriber and client slots freed.
-  std::size_t reclaim() { return detail::reclaim(registry_); }
+  std::size_t reclaim();
 
   // For tools: reads topic `name` whatever its type, in the one subscriber
   // slot each topic keeps for tools (so it takes no real subscriber's, and
   // no `block` publisher ever waits for it). Views of it are raw bytes;
   // hold them briefly. Throws Errc::not_found when there is no such topic.
-  [[nodiscard]] Reader<View<Bytes>> observe(const std::string& name) {
-    auto topic = detail::Topic::inspect(registry_, name);
-    if (!topic) throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + domain() + "'"}};
-    return Reader<View<Bytes>>{std::make_unique<SubscriptionReader<Bytes>>(std::move(topic), SubscribeQos{.spin = std::chrono::microseconds{0}}, runtime(), true)};
-  }
+  [[nodiscard]] Reader<View<Bytes>> observe(const std::string& name);
 
   // For tools: publishes on topic `name` whatever its type, as raw bytes
   // (the type's size, laid out as its description says). The topic must
   // exist (its type is its own) and have no live publisher.
-  [[nodiscard]] Publisher<Bytes> raw_publisher(const std::string& name) {
-    auto topic = detail::Topic::inspect(registry_, name);
-    if (!topic) throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + domain() + "'"}};
-    return Publisher<Bytes>{std::move(topic), std::chrono::milliseconds{1000}, PublishFence::full, {}};
-  }
+  [[nodiscard]] Publisher<Bytes> raw_publisher(const std::string& name);
 
   // For tools: a raw-byte handle on service `name`, whatever its types.
-  [[nodiscard]] ServiceChain<Bytes, Bytes> raw_chain(const std::string& name, ClientQos qos = {}) {
-    auto service = detail::Service::open_existing(registry_, name);
-    if (!service) throw Failure{{Errc::not_found, "no service '" + name + "' in shm domain '" + domain() + "'"}};
-    const auto& h = service->header();
-    auto binding = std::make_shared<detail::Binding>(registry_, name, h.request_type, h.reply_type, qos);
-    return {{std::move(binding)}, Graph::node(name, "service", "shm")};
-  }
+  [[nodiscard]] ServiceChain<Bytes, Bytes> raw_chain(const std::string& name, ClientQos qos = {});
 
-  [[nodiscard]] const std::string& domain() const noexcept { return registry_->domain(); }
+  [[nodiscard]] const std::string& domain() const noexcept;
 
   // Where a periodic loop of this core (prime::every) records its
   // statistics: an entry of the domain's registry, so that `prime ls` and
   // `prime info` show them while it runs; freed with the loop. Throws
   // Errc::domain_full when the domain lists its maximum of loops.
   [[nodiscard]] std::shared_ptr<prime::detail::LoopRecord> record_loop(const std::string& name, Clock::duration period,
-                                                                      Clock::duration deadline) {
-    struct Entry {
-      Entry(std::shared_ptr<detail::Registry> r, std::size_t i) : registry{std::move(r)}, index{i} {}
-      Entry(const Entry&) = delete;
-      Entry& operator=(const Entry&) = delete;
-      ~Entry() { registry->remove_loop(index); }
-      const std::shared_ptr<detail::Registry> registry;
-      const std::size_t index;
-    };
-    auto entry = std::make_shared<Entry>(registry_, registry_->add_loop(name, period, deadline));
-    auto& record = registry_->loop_record(entry->index);
-    return {std::move(entry), &record};
-  }
+                                                                      Clock::duration deadline);
 
  private:
   // A raw reply larger than its room: this service's max_reply_size, or, in
@@ -303,47 +224,39 @@ class Core : public ErasedChainRuntime {
                                               std::to_string(room) + " bytes it may take (this service's max_reply_size, "
                                               "or in a linked call the next service's max_request_size)"}};
   }
+  // A topic's segment, opened for T, and its ring's capacity.
+  struct Opened {
+    std::shared_ptr<detail::Topic> topic;
+    std::size_t capacity;
+  };
   template <Message T>
-  std::shared_ptr<detail::Topic> open(const std::string& name, const TopicQos& asked, const char* side) {
-    const auto type = Fingerprint::of<T>();
-    const auto qos = detail::complete(name, type, std::is_same_v<T, Bytes>, asked);
-    std::scoped_lock lock{mutex_};
-    auto topic = topics_[name].lock();
-    if (topic && !(topic->header().type == type))
-      throw Failure{{Errc::type_mismatch, "topic '" + name + "' carries " + topic->header().type.describe() +
-                                              ", not " + type.describe()}};
-    if (!topic) topics_[name] = topic = detail::Topic::open(registry_, name, type, qos, schema_of<T>());
-    if (const auto have = topic->qos(); !detail::same_layout(have, qos))
-      throw Failure{{Errc::qos_mismatch, "topic '" + name + "' exists with " + detail::describe(have) + "; this " +
-                                             side + " asks for " + detail::describe(qos)}};
-    return topic;
+  Opened open(const std::string& name, const TopicQos& asked, const char* side) {
+    return open_topic(name, Fingerprint::of<T>(), std::is_same_v<T, Bytes>, asked, schema_of<T>(), side);
   }
+  // Topic `name` of `type` (`raw`: Bytes), opened by this core, or created
+  // with `asked` (completed); throws Failure when it carries another type
+  // or has other QoS, naming `side` (who asked).
+  Opened open_topic(const std::string& name, const Fingerprint& type, bool raw, const TopicQos& asked,
+                    const std::string& schema, const char* side);
 
   // Serves `name` with `handler` on qos.workers workers of this core;
   // returns a chain that calls it.
   template <Message Request, Message Reply>
   ServiceChain<Request, Reply> host(const std::string& name, const ServiceQos& qos, detail::Handler handler) {
-    const detail::ServiceSpec spec{Fingerprint::of<Request>(), Fingerprint::of<Reply>(),
-                                   detail::complete(name, Fingerprint::of<Request>(), std::is_same_v<Request, Bytes>,
-                                                    Fingerprint::of<Reply>(), std::is_same_v<Reply, Bytes>, qos),
-                                   schema_of<Request>(), schema_of<Reply>()};
-    auto service = detail::Service::open_to_serve(registry_, name, spec);
-    auto server = std::make_shared<detail::Server>(std::move(service), spec.qos, std::move(handler),
-                                                   [runtime = runtime()](Error e) {
-                                                     if (auto r = runtime.lock()) r->report(std::move(e));
-                                                   });
-    auto owner = runtime().lock();
-    for (std::size_t w = 0; w < spec.qos.workers; ++w)
-      owner->spawn([server, w](std::stop_token stop) { server->work(w, stop); });
+    host_service(name, {Fingerprint::of<Request>(), std::is_same_v<Request, Bytes>, schema_of<Request>()},
+                 {Fingerprint::of<Reply>(), std::is_same_v<Reply, Bytes>, schema_of<Reply>()}, qos, std::move(handler));
     return chain<Request, Reply>(name);
   }
-
-  static std::string program_name() {
-    std::ifstream comm{"/proc/self/comm"};
-    std::string name;
-    std::getline(comm, name);
-    return name;
-  }
+  // One way of a service: its type, whether raw bytes, its description.
+  struct Way {
+    Fingerprint type;
+    bool raw;
+    std::string schema;
+  };
+  void host_service(const std::string& name, const Way& request, const Way& reply, const ServiceQos& qos,
+                    detail::Handler handler);
+  // A client's route to service `name`, bound on its first call.
+  detail::Route bind(const std::string& name, const Fingerprint& request, const Fingerprint& reply, const ClientQos& qos);
 
   std::shared_ptr<detail::Registry> registry_;
   std::mutex mutex_;

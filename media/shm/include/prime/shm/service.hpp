@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "prime/logic/error.hpp"
-#include "prime/shm/detail/caller.hpp"
+#include "prime/shm/service_handles.hpp"
 #include "prime/shm/message.hpp"
 #include "prime/topology/concepts.hpp"
 #include "prime/topology/graph.hpp"
@@ -85,7 +85,7 @@ class ServiceChain {
  public:
   using input_type = typename detail::Wire<In>::argument;
   using output_type = typename detail::Wire<Out>::value;
-  using Route = std::vector<std::shared_ptr<detail::Binding>>;
+  using Route = detail::Route;
 
   ServiceChain(Route route, Graph graph)
       : route_{std::make_shared<const Route>(std::move(route))}, graph_{std::make_shared<const Graph>(std::move(graph))} {}
@@ -156,17 +156,7 @@ static_assert(Chain<ServiceChain<int, double>>);
 // services have): Errc::type_mismatch.
 template <Message A, Message B, Message C>
 [[nodiscard]] ServiceChain<A, C> link(const ServiceChain<A, B>& first, const ServiceChain<B, C>& second) {
-  const auto& out = first.route().back();
-  const auto& in = second.route().front();
-  if (!detail::forwards_into(out->reply(), in->request()))
-    throw Failure{{Errc::type_mismatch, "cannot link service '" + out->name() + "', which gives " + out->reply().describe() +
-                                            ", to service '" + in->name() + "', which takes " + in->request().describe()}};
-  auto route = first.route();
-  route.insert(route.end(), second.route().begin(), second.route().end());
-  if (route.size() > detail::kMaxHops)
-    throw Failure{{Errc::invalid_argument, "a linked call goes through at most " + std::to_string(detail::kMaxHops) +
-                                             " services, not " + std::to_string(route.size())}};
-  return {std::move(route), Graph::sequence(first.graph(), second.graph())};
+  return {detail::linked(first.route(), second.route()), Graph::sequence(first.graph(), second.graph())};
 }
 
 using prime::operator|;  // found by argument-dependent lookup for `service | service`

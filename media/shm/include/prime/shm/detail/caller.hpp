@@ -13,6 +13,7 @@
 #include "prime/common/fingerprint.hpp"
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
+#include "prime/shm/service_handles.hpp"
 #include "prime/shm/detail/service.hpp"
 
 namespace prime::shm::detail {
@@ -68,15 +69,5 @@ class Binding {
   ParticipantId checked_server_ = 0;  // the server last seen alive, and until when that is trusted
   Clock::time_point checked_until_{};
 };
-
-// Writes a request: its bytes at `to` (room for `capacity`); returns its size.
-using RequestWriter = std::function<std::size_t(std::byte* to, std::size_t capacity)>;
-
-// One call through `route` (one service, or several linked: each one's
-// output goes straight into the next one's cell, and the caller sends once
-// and waits once, for the last). `read(reply, size)` takes the answer in
-// place. `posted`: no answer is waited for.
-std::expected<void, Error> call(const std::vector<std::shared_ptr<Binding>>& route, const RequestWriter& write,
-                                const std::function<void(const std::byte*, std::size_t)>& read, bool posted);
 
 }  // namespace prime::shm::detail

@@ -14,13 +14,9 @@
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
 #include "prime/shm/detail/service.hpp"
+#include "prime/shm/service_handles.hpp"
 
 namespace prime::shm::detail {
-
-// Runs the block on a request of `size` bytes at `request` and writes the
-// answer at `out`, which has room for `capacity` bytes; returns the answer's
-// size. What it throws is the call's error.
-using Handler = std::function<std::size_t(const std::byte* request, std::size_t size, std::byte* out, std::size_t capacity)>;
 
 // The one live server of a service: it takes the service over (after one
 // that died, where that one stopped) and its workers answer calls, each in
