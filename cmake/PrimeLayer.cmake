@@ -42,7 +42,11 @@ function(prime_compiled_layer name)
   set_target_properties(prime_${name}_objects PROPERTIES POSITION_INDEPENDENT_CODE ON)
   target_include_directories(prime_${name}_objects PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/include)
   target_compile_features(prime_${name}_objects PRIVATE cxx_std_23)
-  target_compile_options(prime_${name}_objects PRIVATE -Wall -Wextra)
+  # The engine's inline functions stay inside the library, called directly
+  # (no PLT hop between two of its own functions), and its own calls may be
+  # inlined: no one interposes them.
+  target_compile_options(prime_${name}_objects PRIVATE -Wall -Wextra -fvisibility-inlines-hidden
+                                                       -fno-semantic-interposition)
   target_link_libraries(prime_${name}_objects PRIVATE ${arg_LINKS} ${arg_BUILD_LINKS} ${arg_PRIVATE_LINKS})
   foreach(kind IN ITEMS SHARED STATIC)
     if(kind STREQUAL "SHARED")

@@ -33,8 +33,11 @@
 //                    cache line crosses cores, no one is waited for: what is
 //                    left is the publisher's own bookkeeping per message, the
 //                    most it could ever send to another process. The only
-//                    benchmarks here with no second process: the figure the
-//                    two-process ones are read against.
+//                    benchmarks here with no second process (with PathAlone):
+//                    the figure the two-process ones are read against.
+//   PathAlone        loan, publish, take, read and release of one sample, all
+//                    in this one thread: the instructions Prime runs per
+//                    sample on both sides, with nothing crossing cores.
 #include <chrono>
 #include <cstdint>
 #include <optional>
@@ -297,5 +300,24 @@ void BM_PublisherAlone_Shm(benchmark::State& state) { publisher_alone<false>(sta
 void BM_PublisherAlone_ShmBatch(benchmark::State& state) { publisher_alone<true>(state); }
 BENCHMARK(BM_PublisherAlone_Shm)->Arg(64)->UseRealTime();
 BENCHMARK(BM_PublisherAlone_ShmBatch)->Arg(64)->UseRealTime();
+
+// The whole path of one sample in this one process and thread: loan,
+// publish, take, read, release. Nothing crosses cores and nothing waits:
+// what is left is the instructions Prime runs per sample on both sides.
+void BM_PathAlone_Shm(benchmark::State& state) {
+  ipc::run(state, [&](std::size_t bytes) {
+    const auto domain = ipc::new_shm_domain();
+    shm::Core core{domain};
+    auto in = core.subscribe<shm::Bytes>("stream", {}, stream_qos(bytes)).subscribe();
+    auto out = core.publisher<shm::Bytes>("stream", stream_qos(bytes));
+    const auto start = prime::Clock::now();
+    ipc::time_sending(state, [&](std::uint64_t seq) -> std::size_t {
+      send(out, bytes, seq, start + prime::Clock::duration{seq});
+      if (!try_take(in, seq)) throw ipc::PeerError{"shm: sample " + std::to_string(seq) + " was not taken"};
+      return 1;
+    });
+  });
+}
+BENCHMARK(BM_PathAlone_Shm)->Arg(64)->UseRealTime();
 
 }  // namespace

@@ -12,13 +12,12 @@ namespace prime::shm::detail {
 PublisherPort::PublisherPort(std::shared_ptr<Topic> topic, std::chrono::nanoseconds block_timeout, bool light,
                              std::function<void(Error)> report)
     : writer_{std::make_unique<Writer>(std::move(topic), block_timeout, light, std::move(report))},
-      payloads_{writer_->topic()->places().chunks + kPayloadOffset, writer_->topic()->places().stride} {}
+      payloads_{writer_->topic()->places().chunks + kPayloadOffset, writer_->topic()->places().stride},
+      max_size_{writer_->topic()->geometry().max_message_size} {}
 
 PublisherPort::~PublisherPort() = default;
 
 const std::string& PublisherPort::name() const noexcept { return writer_->topic()->name(); }
-
-std::size_t PublisherPort::max_message_size() const noexcept { return writer_->topic()->geometry().max_message_size; }
 
 std::expected<std::uint32_t, Error> PublisherPort::loan() { return writer_->loan(); }
 

@@ -42,7 +42,7 @@ class PublisherPort {
   ~PublisherPort();
 
   [[nodiscard]] const std::string& name() const noexcept;
-  [[nodiscard]] std::size_t max_message_size() const noexcept;
+  [[nodiscard]] std::size_t max_message_size() const noexcept { return max_size_; }
   [[nodiscard]] const Payloads& payloads() const noexcept { return payloads_; }
 
   // A chunk for one loan (Writer::loan: waits under `block`), or why not.
@@ -79,6 +79,7 @@ class PublisherPort {
  private:
   std::unique_ptr<Writer> writer_;
   Payloads payloads_;
+  std::size_t max_size_;  // of a message, checked on each raw loan
   std::size_t loans_ = 0;
   std::shared_ptr<PublisherPort> orphaned_;  // set while loans outlive the publisher
 };
