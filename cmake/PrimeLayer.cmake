@@ -22,7 +22,7 @@ function(prime_header_layer name)
 endfunction()
 
 # prime_compiled_layer(<name> SOURCES <files>... ABI <n> [EXPORT <export-set>]
-#                      [LINKS <targets>...]
+#                      [INSTALL_DETAIL] [LINKS <targets>...]
 #                      [BUILD_LINKS <targets>...] [PRIVATE_LINKS <targets>...])
 # A compiled Prime medium: `prime::<name>` (shared, libprime_<name>.so.<n>)
 # and `prime::<name>_static` (static, libprime_<name>.a), from one set of
@@ -32,9 +32,10 @@ endfunction()
 # them. PRIVATE_LINKS are linked into the library, not into its users'
 # compilations (the static library's users link them too). <n> is the
 # library's ABI version (SOVERSION). Headers under include/.../detail/ are
-# the library's own and are not installed: no public header includes them.
+# the library's own and are not installed, unless INSTALL_DETAIL says the
+# public headers still include some.
 function(prime_compiled_layer name)
-  cmake_parse_arguments(PARSE_ARGV 1 arg "" "EXPORT;ABI" "SOURCES;LINKS;BUILD_LINKS;PRIVATE_LINKS")
+  cmake_parse_arguments(PARSE_ARGV 1 arg "INSTALL_DETAIL" "EXPORT;ABI" "SOURCES;LINKS;BUILD_LINKS;PRIVATE_LINKS")
   if(NOT arg_EXPORT)
     set(arg_EXPORT primeTargets)
   endif()
@@ -42,11 +43,7 @@ function(prime_compiled_layer name)
   set_target_properties(prime_${name}_objects PROPERTIES POSITION_INDEPENDENT_CODE ON)
   target_include_directories(prime_${name}_objects PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/include)
   target_compile_features(prime_${name}_objects PRIVATE cxx_std_23)
-  # The engine's inline functions stay inside the library, called directly
-  # (no PLT hop between two of its own functions), and its own calls may be
-  # inlined: no one interposes them.
-  target_compile_options(prime_${name}_objects PRIVATE -Wall -Wextra -fvisibility-inlines-hidden
-                                                       -fno-semantic-interposition)
+  target_compile_options(prime_${name}_objects PRIVATE -Wall -Wextra)
   target_link_libraries(prime_${name}_objects PRIVATE ${arg_LINKS} ${arg_BUILD_LINKS} ${arg_PRIVATE_LINKS})
   foreach(kind IN ITEMS SHARED STATIC)
     if(kind STREQUAL "SHARED")
@@ -68,7 +65,11 @@ function(prime_compiled_layer name)
     install(TARGETS ${target} EXPORT ${arg_EXPORT}
             LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR} ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR})
   endforeach()
-  install(DIRECTORY include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR} PATTERN detail EXCLUDE)
+  if(arg_INSTALL_DETAIL)
+    install(DIRECTORY include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+  else()
+    install(DIRECTORY include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR} PATTERN detail EXCLUDE)
+  endif()
 endfunction()
 
 # prime_abi(<var> <header> <constant>): the number `<constant> = <n>` sets

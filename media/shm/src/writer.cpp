@@ -1,6 +1,6 @@
 // A topic's publisher taking the topic over, after a dead one where that
-// one stopped, and letting it go. Loans and publishes are inline in
-// writer.hpp, for src/publisher.cpp.
+// one stopped, and letting it go. Loans and publishes stay inline in
+// writer.hpp.
 #include "prime/shm/detail/writer.hpp"
 
 #include "recovery.hpp"

@@ -1,8 +1,6 @@
 #pragma once
 
-#include <chrono>
 #include <cstddef>
-#include <cstdint>
 #include <cstring>
 #include <expected>
 #include <functional>
@@ -16,72 +14,35 @@
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/sample.hpp"
+#include "prime/shm/detail/writer.hpp"
 #include "prime/shm/message.hpp"
-#include "prime/shm/payloads.hpp"
 #include "prime/shm/qos.hpp"
 
 namespace prime::shm {
 
 namespace detail {
 
-class Topic;   // a topic's segment, mapped (compiled in libprime_shm)
-class Writer;  // the publishing engine (compiled in libprime_shm)
+// A Writer with the loans it has out: a Publisher destroyed while a loan
+// lives leaves the writer to that loan, which ends it. One thread at a time
+// uses a publisher and its loans, so the count needs no atomics (the hot
+// path pays nothing for this).
+struct LoaningWriter {
+  template <class... Args>
+  explicit LoaningWriter(Args&&... args) : writer{std::forward<Args>(args)...} {}
 
-// The non-template side of a publisher, compiled in libprime_shm: the
-// topic's Writer, and the loans it has out. A Publisher destroyed while a
-// loan lives leaves the port to that loan, which ends it. One thread at a
-// time uses a publisher and its loans, so the count needs no atomics.
-class PublisherPort {
- public:
-  // `report` hears of each subscriber a `block` publisher stops waiting for;
-  // `light`: fence head stores lightly where this process can.
-  PublisherPort(std::shared_ptr<Topic> topic, std::chrono::nanoseconds block_timeout, bool light,
-                std::function<void(Error)> report);
-  PublisherPort(const PublisherPort&) = delete;
-  PublisherPort& operator=(const PublisherPort&) = delete;
-  ~PublisherPort();
-
-  [[nodiscard]] const std::string& name() const noexcept;
-  [[nodiscard]] std::size_t max_message_size() const noexcept { return max_size_; }
-  [[nodiscard]] const Payloads& payloads() const noexcept { return payloads_; }
-
-  // A chunk for one loan (Writer::loan: waits under `block`), or why not.
-  std::expected<std::uint32_t, Error> loan();
-  // Up to `max` chunks, appended to `out` (Writer::loan_some).
-  std::expected<void, Error> loan_some(std::size_t max, std::vector<std::uint32_t>& out);
-  // A loaned chunk handed back unpublished.
-  void discard(std::uint32_t chunk) noexcept;
-  // Publishes a loaned chunk of `size` bytes as the next sequence.
-  void publish(std::uint32_t chunk, std::size_t size, Clock::time_point stamp) noexcept;
-  // Publishes loaned chunks in order, all stamped `stamp`, or chunk i
-  // stamped stamps[i] (as many as chunks).
-  void publish_some(std::span<const std::uint32_t> chunks, std::size_t size, Clock::time_point stamp) noexcept;
-  void publish_some(std::span<const std::uint32_t> chunks, std::size_t size,
-                    std::span<const Clock::time_point> stamps) noexcept;
-
-  // A loan (or a batch) starts, or ends: the last to end after the
-  // publisher is gone takes the port with it.
-  void start_loan() noexcept { ++loans_; }
-  static void end_loan(PublisherPort* port) noexcept {
-    if (--port->loans_ > 0) return;
-    auto last = std::move(port->orphaned_);
-  }
-  // The publisher goes: while loans are out, the port is theirs.
-  static void release(std::shared_ptr<PublisherPort>& port) noexcept {
-    if (port && port->loans_ > 0) port->orphaned_ = port;
-    port.reset();
-  }
-
+  Writer writer;
+  std::size_t loans = 0;
+  std::shared_ptr<LoaningWriter> orphaned;  // set while loans outlive the publisher
   // The last batch's list of chunks, kept for the next: a batch then costs
   // no allocation.
   std::vector<std::uint32_t> chunk_list;
 
- private:
-  std::unique_ptr<Writer> writer_;
-  Payloads payloads_;
-  std::size_t max_size_;  // of a message, checked on each raw loan
-  std::size_t loans_ = 0;
-  std::shared_ptr<PublisherPort> orphaned_;  // set while loans outlive the publisher
+  // A loan (or a batch) ends: the last to end after the publisher is gone
+  // takes the writer with it.
+  static void end_loan(LoaningWriter* owner) noexcept {
+    if (--owner->loans > 0) return;
+    auto last = std::move(owner->orphaned);
+  }
 };
 
 }  // namespace detail
@@ -93,12 +54,11 @@ template <Message T>
 class Loan {
  public:
   Loan(Loan&& other) noexcept
-      : owner_{std::exchange(other.owner_, nullptr)}, payload_{other.payload_}, chunk_{other.chunk_}, size_{other.size_} {}
+      : owner_{std::exchange(other.owner_, nullptr)}, chunk_{other.chunk_}, size_{other.size_} {}
   Loan& operator=(Loan&& other) noexcept {
     if (this != &other) {
       discard();
       owner_ = std::exchange(other.owner_, nullptr);
-      payload_ = other.payload_;
       chunk_ = other.chunk_;
       size_ = other.size_;
     }
@@ -109,38 +69,36 @@ class Loan {
   [[nodiscard]] T& operator*() const noexcept requires(!std::is_same_v<T, Bytes>) { return *get(); }
   [[nodiscard]] T* operator->() const noexcept requires(!std::is_same_v<T, Bytes>) { return get(); }
   [[nodiscard]] T* get() const noexcept requires(!std::is_same_v<T, Bytes>) {
-    return std::launder(reinterpret_cast<T*>(payload_));
+    return std::launder(reinterpret_cast<T*>(owner_->writer.topic()->payload(chunk_)));
   }
   // The loaned bytes of a raw byte topic.
   [[nodiscard]] std::span<std::byte> bytes() const noexcept requires std::is_same_v<T, Bytes> {
-    return {payload_, size_};
+    return {owner_->writer.topic()->payload(chunk_), size_};
   }
 
   // Makes the sample visible to every subscriber; it is never copied.
   // `stamp` is when the sensor took it (steady_clock: one clock for every
   // process); subscribers read it as View::stamp().
   void publish(Clock::time_point stamp = Clock::now()) && {
-    owner_->publish(chunk_, size_, stamp);
+    owner_->writer.publish(chunk_, size_, stamp);
     end();
   }
 
  private:
   template <Message>
   friend class Publisher;
-  Loan(detail::PublisherPort* owner, std::uint32_t chunk, std::size_t size)
-      : owner_{owner}, payload_{owner->payloads()[chunk]}, chunk_{chunk}, size_{size} {
-    owner_->start_loan();
+  Loan(detail::LoaningWriter* owner, std::uint32_t chunk, std::size_t size) : owner_{owner}, chunk_{chunk}, size_{size} {
+    ++owner_->loans;
   }
 
   void discard() noexcept {
     if (!owner_) return;
-    owner_->discard(chunk_);
+    owner_->writer.discard(chunk_);
     end();
   }
-  void end() noexcept { detail::PublisherPort::end_loan(std::exchange(owner_, nullptr)); }
+  void end() noexcept { detail::LoaningWriter::end_loan(std::exchange(owner_, nullptr)); }
 
-  detail::PublisherPort* owner_;
-  std::byte* payload_;  // the chunk's, found once
+  detail::LoaningWriter* owner_;
   std::uint32_t chunk_;
   std::size_t size_;
 };
@@ -173,49 +131,49 @@ class Batch {
   // How many slots were loaned: at least one, at most what was asked.
   [[nodiscard]] std::size_t size() const noexcept { return chunks_.size(); }
   [[nodiscard]] T& operator[](std::size_t i) const noexcept requires(!std::is_same_v<T, Bytes>) {
-    return *std::launder(reinterpret_cast<T*>(places_[chunks_[i]]));
+    return *std::launder(reinterpret_cast<T*>(places_.payload(chunks_[i])));
   }
   // Slot `i`'s bytes, on a raw byte topic.
   [[nodiscard]] std::span<std::byte> bytes(std::size_t i) const noexcept requires std::is_same_v<T, Bytes> {
-    return {places_[chunks_[i]], size_};
+    return {places_.payload(chunks_[i]), size_};
   }
 
   // Publishes every slot, stamped `stamp`.
   void publish(Clock::time_point stamp = Clock::now()) && {
-    owner_->publish_some(chunks_, size_, stamp);
+    owner_->writer.publish_some(chunks_, size_, [&](std::size_t) { return stamp; });
     end();
   }
   // Publishes every slot, slot i stamped stamps[i] (as many stamps as slots).
   void publish(std::span<const Clock::time_point> stamps) && {
     if (stamps.size() != chunks_.size())
-      throw Failure{{Errc::invalid_argument, "topic '" + owner_->name() + "': a batch of " +
+      throw Failure{{Errc::invalid_argument, "topic '" + owner_->writer.topic()->name() + "': a batch of " +
                                                  std::to_string(chunks_.size()) + " slots published with " +
                                                  std::to_string(stamps.size()) + " stamps"}};
-    owner_->publish_some(chunks_, size_, stamps);
+    owner_->writer.publish_some(chunks_, size_, [&](std::size_t i) { return stamps[i]; });
     end();
   }
 
  private:
   template <Message>
   friend class Publisher;
-  Batch(detail::PublisherPort* owner, std::vector<std::uint32_t> chunks, std::size_t size)
-      : owner_{owner}, places_{owner->payloads()}, chunks_{std::move(chunks)}, size_{size} {
-    owner_->start_loan();
+  Batch(detail::LoaningWriter* owner, std::vector<std::uint32_t> chunks, std::size_t size)
+      : owner_{owner}, places_{owner->writer.topic()->places()}, chunks_{std::move(chunks)}, size_{size} {
+    ++owner_->loans;
   }
 
   void discard() noexcept {
     if (!owner_) return;
-    for (const auto chunk : chunks_) owner_->discard(chunk);
+    for (const auto chunk : chunks_) owner_->writer.discard(chunk);
     end();
   }
   void end() noexcept {
     chunks_.clear();
     owner_->chunk_list = std::move(chunks_);
-    detail::PublisherPort::end_loan(std::exchange(owner_, nullptr));
+    detail::LoaningWriter::end_loan(std::exchange(owner_, nullptr));
   }
 
-  detail::PublisherPort* owner_;
-  detail::Payloads places_;  // the topic's, copied: slot i is found without a walk through the owner
+  detail::LoaningWriter* owner_;
+  detail::Places places_;  // the topic's, copied: slot i is found without a walk through the owner
   std::vector<std::uint32_t> chunks_;
   std::size_t size_;  // bytes in each slot
 };
@@ -229,8 +187,9 @@ class Publisher {
  public:
   Publisher(std::shared_ptr<detail::Topic> topic, std::chrono::milliseconds block_timeout, PublishFence fence,
             std::function<void(Error)> report)
-      : owner_{std::make_shared<detail::PublisherPort>(std::move(topic), saturating_cast<std::chrono::nanoseconds>(block_timeout),
-                                                       fence == PublishFence::light, std::move(report))} {}
+      : owner_{std::make_shared<detail::LoaningWriter>(std::move(topic), saturating_cast<std::chrono::nanoseconds>(block_timeout),
+                                                       fence == PublishFence::light,
+                                                       std::move(report))} {}
   Publisher(Publisher&&) noexcept = default;
   Publisher& operator=(Publisher&& other) noexcept {
     if (this != &other) {
@@ -250,9 +209,9 @@ class Publisher {
   // capacity is Errc::queue_full. Under drop_oldest, loans are bounded
   // by the topic's spare chunks (Errc::queue_full, saying how many are out).
   [[nodiscard]] std::expected<Loan<T>, Error> loan() requires(!std::is_same_v<T, Bytes>) {
-    auto chunk = owner_->loan();
+    auto chunk = owner_->writer.loan();
     if (!chunk) return std::unexpected(std::move(chunk.error()));
-    ::new (owner_->payloads()[*chunk]) T;
+    ::new (owner_->writer.topic()->payload(*chunk)) T;
     return Loan<T>{owner_.get(), *chunk, sizeof(T)};
   }
 
@@ -260,7 +219,7 @@ class Publisher {
   // maximum is Errc::too_large, naming both.
   [[nodiscard]] std::expected<Loan<T>, Error> loan(std::size_t size) requires std::is_same_v<T, Bytes> {
     if (auto fits = check_size(size); !fits) return std::unexpected(std::move(fits.error()));
-    auto chunk = owner_->loan();
+    auto chunk = owner_->writer.loan();
     if (!chunk) return std::unexpected(std::move(chunk.error()));
     return Loan<T>{owner_.get(), *chunk, size};
   }
@@ -273,7 +232,7 @@ class Publisher {
   [[nodiscard]] std::expected<Batch<T>, Error> loan_some(std::size_t max) requires(!std::is_same_v<T, Bytes>) {
     auto chunks = loan_chunks(max);
     if (!chunks) return std::unexpected(std::move(chunks.error()));
-    for (const auto chunk : *chunks) ::new (owner_->payloads()[chunk]) T;
+    for (const auto chunk : *chunks) ::new (owner_->writer.topic()->payload(chunk)) T;
     return Batch<T>{owner_.get(), std::move(*chunks), sizeof(T)};
   }
   // The same on a raw byte topic, each slot `size` bytes.
@@ -307,11 +266,11 @@ class Publisher {
     return {};
   }
 
-  [[nodiscard]] const std::string& name() const noexcept { return owner_->name(); }
+  [[nodiscard]] const std::string& name() const noexcept { return owner_->writer.topic()->name(); }
 
  private:
   std::expected<void, Error> check_size(std::size_t size) const {
-    const auto max = owner_->max_message_size();
+    const auto max = owner_->writer.topic()->geometry().max_message_size;
     if (size <= max) return {};
     return std::unexpected(Error{Errc::too_large, "topic '" + name() + "': a message of " + std::to_string(size) +
                                                            " bytes exceeds its maximum of " + std::to_string(max) + " bytes"});
@@ -322,13 +281,16 @@ class Publisher {
     auto chunks = std::move(owner_->chunk_list);
     chunks.clear();
     chunks.reserve(max);
-    if (auto done = owner_->loan_some(max, chunks); !done) return std::unexpected(std::move(done.error()));
+    if (auto done = owner_->writer.loan_some(max, chunks); !done) return std::unexpected(std::move(done.error()));
     return chunks;
   }
 
-  void release() noexcept { detail::PublisherPort::release(owner_); }
+  void release() noexcept {
+    if (owner_ && owner_->loans > 0) owner_->orphaned = owner_;  // the last loan ends the writer
+    owner_.reset();
+  }
 
-  std::shared_ptr<detail::PublisherPort> owner_;
+  std::shared_ptr<detail::LoaningWriter> owner_;
 };
 
 }  // namespace prime::shm

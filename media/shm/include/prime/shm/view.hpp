@@ -11,7 +11,7 @@
 #include <utility>
 
 #include "prime/logic/sample.hpp"
-#include "prime/shm/subscriber_port.hpp"
+#include "prime/shm/detail/subscriber.hpp"
 #include "prime/shm/message.hpp"
 
 namespace prime::shm {
@@ -30,38 +30,32 @@ class SubscriptionReader;
 template <Message T>
 class View {
  public:
-  View(const View& other) noexcept
-      : owner_{other.owner_}, payload_{other.payload_}, chunk_{other.chunk_}, seq_{other.seq_}, info_{other.info_} {
-    if (owner_) detail::hold_again(owner_, chunk_);
+  View(const View& other) noexcept : owner_{other.owner_}, chunk_{other.chunk_}, seq_{other.seq_}, info_{other.info_} {
+    if (owner_) owner_->hold_again(chunk_);
   }
   View(View&& other) noexcept
-      : owner_{std::exchange(other.owner_, nullptr)},
-        payload_{other.payload_},
-        chunk_{other.chunk_},
-        seq_{other.seq_},
-        info_{other.info_} {}
+      : owner_{std::exchange(other.owner_, nullptr)}, chunk_{other.chunk_}, seq_{other.seq_}, info_{other.info_} {}
   View& operator=(View other) noexcept {
     std::swap(owner_, other.owner_);
-    std::swap(payload_, other.payload_);
     std::swap(chunk_, other.chunk_);
     std::swap(seq_, other.seq_);
     std::swap(info_, other.info_);
     return *this;
   }
   ~View() {
-    if (owner_) detail::drop(owner_, chunk_);
+    if (owner_) owner_->drop(chunk_);
   }
 
   [[nodiscard]] const T& operator*() const noexcept requires(!std::is_same_v<T, Bytes>) { return *get(); }
   [[nodiscard]] const T* operator->() const noexcept requires(!std::is_same_v<T, Bytes>) { return get(); }
   [[nodiscard]] const T* get() const noexcept requires(!std::is_same_v<T, Bytes>) {
-    return std::launder(reinterpret_cast<const T*>(payload_));
+    return std::launder(reinterpret_cast<const T*>(owner_->topic().payload(chunk_)));
   }
   operator const T&() const noexcept requires(!std::is_same_v<T, Bytes>) { return *get(); }  // NOLINT
 
   // The bytes of a raw byte topic's message.
   [[nodiscard]] std::span<const std::byte> bytes() const noexcept {
-    return {payload_, info_.size};
+    return {owner_->topic().payload(chunk_), info_.size};
   }
   // Its place in the topic: 0 for the first sample ever published.
   [[nodiscard]] std::uint64_t sequence() const noexcept { return seq_; }
@@ -83,14 +77,19 @@ class View {
   template <Message>
   friend class SubscriptionReader;
   // Whether no copy of this view lives: letting go of it lets go of its sample.
-  [[nodiscard]] bool only_view() const noexcept { return owner_ != nullptr && detail::views_of(owner_, chunk_) == 1; }
+  [[nodiscard]] bool only_view() const noexcept { return owner_ != nullptr && owner_->views_of(chunk_) == 1; }
 
-  // A sample `owner` just took, held for this view, its bytes at `payload`.
-  View(detail::Subscriber* owner, std::byte* payload, const detail::Taken& taken) noexcept
-      : owner_{owner}, payload_{payload}, chunk_{taken.chunk}, seq_{taken.seq}, info_{taken.info} {}
+  // A sample just taken by `owner`.
+  View(detail::Subscriber* owner, const detail::Taken& taken)
+      : owner_{owner}, chunk_{taken.chunk}, seq_{taken.seq}, info_{taken.info} {
+    owner_->hold_taken(chunk_);
+  }
+  // One of several samples taken together, held already (Subscriber::hold_taken for them all).
+  struct Held {};
+  View(detail::Subscriber* owner, const detail::Taken& taken, Held) noexcept
+      : owner_{owner}, chunk_{taken.chunk}, seq_{taken.seq}, info_{taken.info} {}
 
   detail::Subscriber* owner_;  // kept alive by the chunk this view holds
-  std::byte* payload_;         // the chunk's: reached without a walk through the owner
   std::uint32_t chunk_;
   std::uint64_t seq_;
   detail::TakenInfo info_;  // its size and stamp, as read when taken

@@ -8,7 +8,7 @@
 #include <utility>
 
 #include "prime/logic/sample.hpp"
-#include "prime/shm/subscriber_port.hpp"
+#include "prime/shm/detail/subscriber.hpp"
 #include "prime/shm/message.hpp"
 
 namespace prime::shm {
@@ -21,7 +21,7 @@ class SubscriptionReader;
 // then let go of all at once. On a `block` topic the cursor keeps them:
 // reading a batch writes nothing in shared memory per sample, two words
 // per batch (a batch kept out for long is held instead, see
-// src/ and docs/shm-internals.md). Its samples count against the reader's max_held
+// detail/cursor.hpp). Its samples count against the reader's max_held
 // while it lives.
 //
 // Move-only; it may outlive its reader. Thread-safe to destroy on any
@@ -55,11 +55,11 @@ class Views {
   [[nodiscard]] bool empty() const noexcept { return chunks_.empty(); }
   // Sample `i`, where its publisher wrote it.
   [[nodiscard]] const T& operator[](std::size_t i) const noexcept requires(!std::is_same_v<T, Bytes>) {
-    return *std::launder(reinterpret_cast<const T*>(places_[chunks_[i]]));
+    return *std::launder(reinterpret_cast<const T*>(places_.payload(chunks_[i])));
   }
   // The bytes of sample `i` of a raw byte topic.
   [[nodiscard]] std::span<const std::byte> bytes(std::size_t i) const noexcept {
-    return {places_[chunks_[i]], static_cast<std::size_t>(info_[i].size)};
+    return {places_.payload(chunks_[i]), static_cast<std::size_t>(info_[i].size)};
   }
   // Sample `i`'s place in the topic: the first's plus i.
   [[nodiscard]] std::uint64_t sequence(std::size_t i) const noexcept { return first_ + i; }
@@ -71,17 +71,22 @@ class Views {
  private:
   template <Message>
   friend class SubscriptionReader;
-  // A batch `owner` just took (counted against its budget until it ends).
-  Views(detail::Subscriber* owner, const detail::Payloads& places, const detail::TakenSpan& taken) noexcept
-      : owner_{owner}, places_{places}, index_{taken.index}, chunks_{taken.chunks}, info_{taken.info}, first_{taken.first} {}
+  // Batch `index` of `owner`'s cursor, just taken (Subscriber::hold_batch counted it).
+  Views(detail::Subscriber* owner, std::uint32_t index)
+      : owner_{owner}, places_{owner->topic().places()}, index_{index} {
+    const auto& batch = owner->cursor().batch(index);
+    chunks_ = batch.chunks;
+    info_ = batch.info;
+    first_ = batch.first;
+  }
   void end() noexcept {
-    if (owner_) detail::end_batch(std::exchange(owner_, nullptr), index_);
+    if (owner_) std::exchange(owner_, nullptr)->end_batch(index_);
     chunks_ = {};
     info_ = {};
   }
 
   detail::Subscriber* owner_ = nullptr;  // kept alive by the samples this batch counts
-  detail::Payloads places_{};  // the topic's, copied: sample i is found without a walk through the owner
+  detail::Places places_{};  // the topic's, copied: sample i is found without a walk through the owner
   std::uint32_t index_ = 0;
   std::span<const std::uint32_t> chunks_;  // the batch's, unchanged while it is out
   std::span<const detail::TakenInfo> info_;  // each sample's size and stamp, copied when taken

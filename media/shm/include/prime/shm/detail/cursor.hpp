@@ -367,6 +367,7 @@ class Cursor {
   // Frees the slots of batches that ended (before any take: a pinned one's
   // holds go first).
   void retire_ended() noexcept {
+    if (live_.empty()) return;  // no batch out: the one-at-a-time take's case
     std::size_t kept = 0;
     for (const auto i : live_) {
       auto& b = batches_[i];

@@ -8,7 +8,6 @@
 #include "prime/shm/detail/layout.hpp"
 #include "prime/shm/detail/prefetch.hpp"
 #include "prime/shm/detail/topic.hpp"
-#include "prime/shm/subscriber_port.hpp"
 
 namespace prime::shm::detail {
 
@@ -26,6 +25,20 @@ namespace prime::shm::detail {
 // A path taking several samples looks at all of them first (their lines
 // travel together), then holds them in order, stopping at the first whose
 // check fails.
+
+// A sample's size and stamp, as read when it was taken.
+struct TakenInfo {
+  std::uint64_t size;
+  std::int64_t stamp;
+};
+
+// A sample taken by a subscriber: its chunk, held by the subscriber's bit
+// until released.
+struct Taken {
+  std::uint32_t chunk;
+  std::uint64_t seq;
+  TakenInfo info;
+};
 
 // Sample `seq`'s size and stamp, read beside the ring as SampleInfo says;
 // none when they are not its own (the publisher is overwriting them: the

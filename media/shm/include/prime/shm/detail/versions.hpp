@@ -23,6 +23,6 @@ inline constexpr std::uint32_t kServiceLayout = 5;
 // libprime_shm's ABI version (its SOVERSION, read from here by
 // media/shm/CMakeLists.txt): raise it whenever a compiled function's
 // signature or a type its callers lay out changes.
-inline constexpr int kAbi = 3;
+inline constexpr int kAbi = 2;
 
 }  // namespace prime::shm::detail
