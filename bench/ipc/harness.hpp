@@ -1,8 +1,9 @@
 #pragma once
 
 // The harness of prime_ipc: every benchmark runs between two real processes
-// (but PublisherAlone, in shm_peer.cpp: Shm's publishing side by itself, the
-// figure the two-process throughputs are read against).
+// (but PublisherAlone and PathAlone, in shm_peer.cpp: Shm's publishing side,
+// and its whole path, by themselves in one thread, the figures the
+// two-process ones are read against).
 // This process (the parent) times; the other (the child) is this same binary
 // re-executed as `prime_ipc --ipc-child <entry> ...`, which benchmark_main()
 // hands to child_main() before Google Benchmark or any library sees it. So a child

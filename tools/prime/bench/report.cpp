@@ -477,6 +477,9 @@ std::string headline(const Results& r, const std::vector<Results>& rounds) {
       {spsc, {"Views across processes", rate("ShmViews", "throughput", 64)}});
   row("Shm publisher alone, one at a time, 64 B", rate("Shm", "publisher-alone", 64), true,
       {spsc, {"Shm across processes", rate("Shm", "throughput", 64)}});
+  row("Shm whole path alone, one at a time (loan, publish, take, release in one thread), 64 B",
+      rate("Shm", "path-alone", 64), true,
+      {{"publisher alone", rate("Shm", "publisher-alone", 64)}, {"Shm across processes", rate("Shm", "throughput", 64)}});
   row("Shm publish to 4 reader processes, 64 B (publisher's time per message)", at("Shm", "fanout-publish-4", 64, "publish"),
       false, {{"1 reader", at("Shm", "fanout-publish-1", 64, "publish")}, {"cache-line floor", p50("Floor", "latency", 64)}});
   row("Shm service round trip, 64 B, p50", p50("ShmService", "round-trip", 64), false,

@@ -88,6 +88,7 @@ void read_ipc(const Json& run, Results& out) {
   else if (kind == "FanOutPublish") add_counters(run, who, "fanout-publish-" + parts[1], 64, 1, out);
   else if (kind == "Sleeping") add_counters(run, who, "sleeping-" + parts[1] + "hz", 64, 1, out);
   else if (kind == "PublisherAlone") add_counters(run, who, "publisher-alone", argument, 1, out);
+  else if (kind == "PathAlone") add_counters(run, who, "path-alone", argument, 1, out);
 }
 
 // prime_table1: BM_<Who>/<payload>/<lanes>, ns_per_hop.
@@ -209,7 +210,7 @@ std::vector<Suite> suites() {
       {.name = "ipc",
        .title = "two processes: Shm, its services and their peers",
        .binary = "ipc/prime_ipc",
-       .quick_filter = "^BM_(Latency|Throughput|RoundTrip|PublisherAlone)_[A-Za-z]+[0-9]*/(64|1048576)/"
+       .quick_filter = "^BM_(Latency|Throughput|RoundTrip|PublisherAlone|PathAlone)_[A-Za-z]+[0-9]*/(64|1048576)/"
                        "|^BM_Calls_ShmService/1/|^BM_FanOut(Throughput|Publish)?_Shm/[14]/|^BM_Loaded_|^BM_Sleeping_Shm/1000/",
        .full_filter = "-^BM_Loop/",  // the loop suite's, below
        .quick_min_time = 0.05,
