@@ -27,6 +27,7 @@
 #include "prime/logic/error.hpp"
 #include "bench/command.hpp"
 #include "json.hpp"
+#include "record_commands.hpp"
 #include "shm_commands.hpp"
 
 namespace {
@@ -152,6 +153,31 @@ int main(int argc, char** argv) {
   command("graph", "the running system as Graphviz DOT", [&] { return shm_graph(o); }, [&] { return optimus_graph(o); });
   command("clean", "remove what dead participants left; never touches a live one's", [&] { return shm_clean(o); })
       ->add_flag("--all", o.all, "every domain on this machine, not only --domain");
+  RecordOptions rec;
+  std::string recording;
+  auto* record = command("record", "record topics into an MCAP file, as the domain's observer (never slowing a publisher)",
+                         [&] { return shm_record(o, rec); });
+  record->add_option("topics", rec.topics, "the topics to record");
+  record->add_flag("--all", rec.all, "every topic, and those that appear while recording");
+  record->add_option("--exclude", rec.exclude, "with --all: leave out topics this regular expression finds");
+  record->add_option("-o,--output", rec.out, "the MCAP file to write");
+  record->add_option("--compression", rec.compression, "of each chunk: none, lz4 or zstd (default)")
+      ->check(CLI::IsMember({"none", "lz4", "zstd"}));
+  record->add_option("--chunk-size", rec.chunk_size, "bytes of messages a chunk collects (default 1 MiB)")
+      ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 30));
+  record->add_option("--duration", o.duration, "seconds to record (default: until Ctrl-C)")->check(number_in(0, kMaxSeconds, kSecondsText));
+  record->add_option("-n,--count", o.count, "stop after this many samples");
+  auto* info_of_recording = record->add_subcommand("info", "what a recording holds: topics, types, counts, rates, losses");
+  info_of_recording->add_option("file", recording, "the MCAP file")->required();
+  info_of_recording->callback([&] { run = [&] { return record_info(o, recording); }; });
+  record->callback([&, info_of_recording, redis] {
+    if (info_of_recording->parsed()) return;
+    run = redis ? std::function<int()>{[] {
+      std::cerr << "prime: record is for shared-memory domains (recording Optimus sources is not built yet)\n";
+      return int{kUsage};
+    }}
+                : std::function<int()>{[&] { return shm_record(o, rec); }};
+  });
   bench::Options b;
   auto* bench = command("bench", "measure what each hop costs, against the floors and the peers: a report folder",
                         [&] {

@@ -103,6 +103,8 @@ shm::DomainAccess access_to(const Options& o) {
   return *access;
 }
 
+}  // namespace
+
 shm::RegistrySnapshot snapshot_of(const Options& o) {
   const auto access = access_to(o);
   auto seen = shm::inspect(o.domain, access.owner);
@@ -119,6 +121,8 @@ shm::DomainOptions joining(const Options& o, const std::string& participant) {
   const auto access = access_to(o);
   return {.permissions = access.permissions & 0666u, .owner = access.owner, .participant = participant, .only_if_alive = true};
 }
+
+namespace {
 
 // The topic or service of that name in a snapshot's list, or null.
 template <class Endpoint>

@@ -7,6 +7,8 @@
 #include <vector>
 
 #include "prime/logic/sample.hpp"
+#include "prime/shm/inspect.hpp"
+#include "prime/shm/qos.hpp"
 
 namespace prime::tool {
 
@@ -42,6 +44,12 @@ int nothing_published(const Options& o);
 
 // What a command's exit code says.
 enum Exit : int { kOk = 0, kFailed = 1, kUsage = 2, kNotFound = 3, kNothing = 4, kUnreachable = 5, kInterrupted = 130 };
+
+// The domain `o` names, as it is now; Errc::not_found when it is not there,
+// unreachable when a user not trusted set it up.
+shm::RegistrySnapshot snapshot_of(const Options& o);
+// How a command joins that domain, as a participant named `participant`.
+shm::DomainOptions joining(const Options& o, const std::string& participant);
 
 int shm_domains(const Options& o);
 int shm_ls(const Options& o);

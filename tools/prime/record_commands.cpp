@@ -1,0 +1,204 @@
+// prime record: topics of a shared-memory domain, read as the domain's
+// observer (a `block` publisher never waits for it), written into an MCAP
+// file; prime record info: what a recording holds.
+#include "record_commands.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <regex>
+#include <set>
+#include <thread>
+
+#include "json.hpp"
+#include "prime/record/mcap_reader.hpp"
+#include "prime/record/mcap_writer.hpp"
+#include "prime/shm.hpp"
+#include "stats.hpp"
+#include "table.hpp"
+
+namespace prime::tool {
+
+namespace {
+
+using namespace std::chrono_literals;
+namespace rec = prime::record;
+
+// What a recording's channels say of their topics, in its metadata.
+constexpr auto kLosses = "prime.losses";  // per topic: samples overwritten before the recorder read them
+constexpr auto kClock = "prime.clock";    // steady_to_unix_ns: what was added to each steady stamp
+
+rec::Compression compression_named(const std::string& name) {
+  if (name == "none") return rec::Compression::none;
+  if (name == "lz4") return rec::Compression::lz4;
+  if (name == "zstd") return rec::Compression::zstd;
+  throw Failure{{Errc::invalid_argument, "compression '" + name + "' is none of none, lz4, zstd"}};
+}
+
+// One topic being recorded: its reader in the tools' slot, its channel.
+struct Recorded {
+  std::string topic;
+  Reader<shm::View<shm::Bytes>> reader;
+  std::uint16_t channel;
+  std::uint64_t written = 0;
+};
+
+}  // namespace
+
+int shm_record(const Options& o, const RecordOptions& r) {
+  if (r.out.empty()) throw Failure{{Errc::invalid_argument, "record: no file given (-o FILE.mcap)"}};
+  if (r.topics.empty() && !r.all) throw Failure{{Errc::invalid_argument, "record: name the topics, or --all"}};
+  if (!r.topics.empty() && r.all) throw Failure{{Errc::invalid_argument, "record: topics named and --all: one or the other"}};
+  std::optional<std::regex> exclude;
+  if (!r.exclude.empty()) {
+    try {
+      exclude.emplace(r.exclude, std::regex::extended);
+    } catch (const std::regex_error& e) {
+      throw Failure{{Errc::invalid_argument, "record: --exclude '" + r.exclude + "' is no regular expression: " + e.what()}};
+    }
+  }
+  const auto snapshot = snapshot_of(o);
+  shm::Core core{o.domain, joining(o, "prime record")};
+  rec::McapWriter file{r.out, {.compression = compression_named(r.compression), .chunk_size = r.chunk_size, .profile = ""}};
+  // Stamps are steady_clock (one clock for every process of the machine):
+  // written as Unix time, by one offset taken now and kept in the file.
+  const auto steady_to_unix = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                  std::chrono::system_clock::now().time_since_epoch() - Clock::now().time_since_epoch())
+                                  .count();
+  file.add_metadata(kClock, {{"steady_to_unix_ns", std::to_string(steady_to_unix)}});
+  std::vector<std::unique_ptr<Recorded>> recorded;
+  std::set<std::string> known;
+  std::map<std::string, std::uint16_t> schemas;
+  // Opens what is to be recorded and is not yet: every topic named must be
+  // there at the start; with --all, topics that appear later join.
+  auto open = [&](const shm::RegistrySnapshot& s, bool at_start) {
+    auto wanted = [&](const std::string& name) {
+      if (r.all) return !(exclude && std::regex_search(name, *exclude));
+      return std::ranges::find(r.topics, name) != r.topics.end();
+    };
+    if (at_start)
+      for (const auto& name : r.topics)
+        if (std::ranges::none_of(s.topics, [&](const auto& t) { return t.name == name; }))
+          throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + o.domain + "'"}};
+    for (const auto& t : s.topics) {
+      if (known.contains(t.name) || !wanted(t.name)) continue;
+      known.insert(t.name);
+      auto schema = schemas.find(t.type);
+      if (schema == schemas.end()) schema = schemas.emplace(t.type, file.add_schema(t.type, "prime", t.schema)).first;
+      const auto channel = file.add_channel(
+          schema->second, t.name, "prime-raw",
+          {{"type", t.type},
+           {"capacity", std::to_string(t.qos.capacity)},
+           {"max_message_size", std::to_string(t.qos.max_message_size)},
+           {"overflow", t.qos.overflow == Overflow::block ? "block" : "drop_oldest"}});
+      recorded.push_back(std::make_unique<Recorded>(Recorded{t.name, core.observe(t.name), channel}));
+    }
+  };
+  open(snapshot, true);
+  if (recorded.empty()) std::cerr << "prime: no topic to record yet; waiting for some (--all)\n";
+
+  finish_on_ctrl_c();
+  const auto start = Clock::now();
+  const auto until = o.duration > 0 ? start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration))
+                                    : Clock::time_point::max();
+  std::uint64_t total = 0;
+  auto next_look = start + 1s;
+  while (!ctrl_c_pressed() && Clock::now() < until && (o.count == 0 || total < o.count)) {
+    bool any = false;
+    for (auto& t : recorded) {
+      // Its one view at a time (the tools' slot holds one): written, then let go.
+      for (int k = 0; k < 256 && (o.count == 0 || total < o.count); ++k) {
+        auto sample = t->reader.try_read();
+        if (!sample) break;
+        const auto arrived = Clock::now();
+        const auto bytes = sample->value.bytes();
+        const auto log_time = static_cast<std::uint64_t>(sample->stamp.time_since_epoch().count() + steady_to_unix);
+        const auto publish_time = static_cast<std::uint64_t>(arrived.time_since_epoch().count() + steady_to_unix);
+        file.write(t->channel, static_cast<std::uint32_t>(sample->value.sequence()), log_time, publish_time, bytes);
+        ++t->written;
+        ++total;
+        any = true;
+      }
+    }
+    if (r.all && Clock::now() >= next_look) {
+      open(core.registry(), false);
+      next_look = Clock::now() + 1s;
+    }
+    if (!any) std::this_thread::sleep_for(200us);
+  }
+  std::map<std::string, std::string> losses;
+  for (const auto& t : recorded) losses[t->topic] = std::to_string(t->reader.lost());
+  file.add_metadata(kLosses, losses);
+  file.close();
+  for (const auto& t : recorded)
+    std::cerr << "prime: recorded " << t->written << " samples of '" << t->topic << "', lost " << t->reader.lost() << '\n';
+  std::cerr << "prime: " << r.out << ": " << file.bytes_written() << " bytes\n";
+  const bool open_ended = o.duration <= 0 && o.count == 0;
+  return after_ctrl_c(open_ended, int{kOk});
+}
+
+int record_info(const Options& o, const std::string& path) {
+  const rec::McapReader reader{path};
+  const auto& s = reader.summary();
+  std::map<std::string, std::string> losses;
+  for (const auto& m : s.metadata)
+    if (m.name == kLosses) losses = m.values;
+  const auto& st = s.statistics;
+  const double seconds = st.message_count > 1 ? static_cast<double>(st.message_end_time - st.message_start_time) / 1e9 : 0.0;
+  std::set<std::string> compressions;
+  std::uint64_t compressed = 0, uncompressed = 0;
+  for (const auto& c : s.chunks) {
+    compressions.insert(c.compression.empty() ? "none" : c.compression);
+    compressed += c.compressed_size;
+    uncompressed += c.uncompressed_size;
+  }
+  std::string compression;
+  for (const auto& c : compressions) compression += (compression.empty() ? "" : ",") + c;
+  auto count_of = [&](std::uint16_t id) {
+    const auto it = st.channel_message_counts.find(id);
+    return it == st.channel_message_counts.end() ? std::uint64_t{0} : it->second;
+  };
+  auto type_of = [&](const rec::Channel& ch) {
+    const auto it = s.schemas.find(ch.schema_id);
+    return it == s.schemas.end() ? std::string{} : it->second.name;
+  };
+  auto lost_of = [&](const rec::Channel& ch) -> std::string {
+    const auto it = losses.find(ch.topic);
+    return it == losses.end() ? std::string{"?"} : it->second;
+  };
+  if (o.json) {
+    std::cout << "{\"file\":" << quote(path) << ",\"bytes\":" << s.file_size << ",\"complete\":" << (reader.complete() ? "true" : "false")
+              << ",\"library\":" << quote(s.library) << ",\"messages\":" << st.message_count << ",\"chunks\":" << s.chunks.size()
+              << ",\"compression\":" << quote(compression) << ",\"compressed_bytes\":" << compressed
+              << ",\"uncompressed_bytes\":" << uncompressed << ",\"start_ns\":" << st.message_start_time
+              << ",\"end_ns\":" << st.message_end_time << ",\"duration_s\":" << fixed(seconds, 6) << ",\"topics\":[";
+    bool first = true;
+    for (const auto& [id, ch] : s.channels) {
+      const auto n = count_of(id);
+      std::cout << (first ? "" : ",") << "{\"topic\":" << quote(ch.topic) << ",\"type\":" << quote(type_of(ch))
+                << ",\"messages\":" << n << ",\"rate\":" << fixed(seconds > 0 ? static_cast<double>(n) / seconds : 0.0)
+                << ",\"lost\":" << (losses.contains(ch.topic) ? losses.at(ch.topic) : "null") << "}";
+      first = false;
+    }
+    std::cout << "]}\n";
+    return kOk;
+  }
+  std::cout << "file:        " << path << " (" << s.file_size << " bytes" << (reader.complete() ? "" : ", cut short: read up to its last complete chunk") << ")\n"
+            << "written by:  " << (s.library.empty() ? "?" : s.library) << "\n"
+            << "messages:    " << st.message_count << " in " << s.chunks.size() << " chunks\n"
+            << "duration:    " << fixed(seconds, 3) << " s\n"
+            << "compression: " << (compression.empty() ? "none" : compression) << " (" << compressed << " of "
+            << uncompressed << " bytes)\n";
+  Table table{std::vector<std::string>{"TOPIC", "TYPE", "MESSAGES", "RATE/s", "LOST"}};
+  for (const auto& [id, ch] : s.channels) {
+    const auto n = count_of(id);
+    table.add({ch.topic, type_of(ch), std::to_string(n), fixed(seconds > 0 ? static_cast<double>(n) / seconds : 0.0),
+               lost_of(ch)});
+  }
+  table.print(std::cout);
+  return kOk;
+}
+
+}  // namespace prime::tool

@@ -1,0 +1,26 @@
+#pragma once
+
+// `prime record`: topics of a shared-memory domain into an MCAP file, and
+// `prime record info`: what a recording holds.
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "shm_commands.hpp"
+
+namespace prime::tool {
+
+struct RecordOptions {
+  std::vector<std::string> topics;  // none: --all
+  bool all = false;
+  std::string exclude;  // a regular expression of topics to leave out (with --all)
+  std::string out;      // the file
+  std::string compression = "zstd";
+  std::size_t chunk_size = 1 << 20;
+};
+
+int shm_record(const Options& o, const RecordOptions& r);
+int record_info(const Options& o, const std::string& file);
+
+}  // namespace prime::tool
