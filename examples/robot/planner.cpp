@@ -3,15 +3,14 @@
 // sensors' rates lets it decide sooner); a collector holds the newest pair;
 // a 50 Hz control loop runs localize | plan | control on it and calls the
 // driver's service with the command, stamped with the scan's time.
-#include <cmath>
 #include <cstdio>
-#include <numbers>
 #include <optional>
 #include <string>
 #include <thread>
 #include <tuple>
 
 #include "messages.hpp"
+#include "planning.hpp"
 #include "prime/liberty.hpp"
 #include "prime/shm.hpp"
 #include "processes.hpp"
@@ -22,42 +21,13 @@ using namespace std::chrono_literals;
 // A synchronised set: the scan and the odometry, read in place, with their stamps.
 using Sensed = prime::Synced<prime::shm::View<Scan>, prime::shm::View<Odometry>>;
 
-struct Pose {
-  double x, y, heading;
-  std::int64_t stamp_ns;
-};
-struct Path {
-  Pose from;
-  double goal_x, goal_y;
-};
-
-// Plain code, testable without Prime: walls give the position, odometry the heading.
-Pose localize(const Sensed& in) {
-  const auto& [scan, odom] = in;
-  const double x = (kRoom - scan->wall_distance[0] + scan->wall_distance[2]) / 2;
-  const double y = (kRoom - scan->wall_distance[1] + scan->wall_distance[3]) / 2;
-  return {x, y, odom->heading, in.stamp<0>().time_since_epoch().count()};
-}
-Path plan(const Pose& p) {  // drive a square: corner to corner
-  const double goal = (std::fmod(static_cast<double>(p.stamp_ns) / 1e9, 20.0) < 10.0) ? kRoom - 1 : 1;
-  return {p, goal, goal};
-}
-MotorCommand control(const Path& path) {
-  const double dx = path.goal_x - path.from.x, dy = path.goal_y - path.from.y;
-  const double distance = std::hypot(dx, dy);
-  double turn = std::atan2(dy, dx) - path.from.heading;
-  while (turn > std::numbers::pi) turn -= 2 * std::numbers::pi;
-  while (turn < -std::numbers::pi) turn += 2 * std::numbers::pi;
-  return {std::min(1.0, distance), 2 * turn, path.from.stamp_ns};
-}
-
 int planner(const std::string& domain, Trigger trigger, const std::atomic<bool>& stop) {
   prime::shm::Core shm{domain, {.participant = "planner"}};
   prime::liberty::Core local;
   const prime::shm::TopicQos lidar_qos{.capacity = 16}, odom_qos{.capacity = 32};
   auto sets = prime::sync(prime::approximate_time({.min_interval = {15ms, 5ms}}),
                           shm.subscribe<Scan>("sensors/lidar", {}, lidar_qos), shm.subscribe<Odometry>("sensors/odom", {}, odom_qos));
-  auto step = local.chain(localize, "localize") | local.chain(plan, "plan") | local.chain(control, "control");
+  auto step = local.chain(localize<Sensed>, "localize") | local.chain(plan, "plan") | local.chain(control, "control");
   auto motors = shm.chain<MotorCommand, Applied>("driver/command", {.timeout = 50ms, .wait_for_service = 5s});
   std::atomic<std::uint64_t> sent = 0, waiting = 0;
   const auto drive = [&](const Sensed& sensed) {

@@ -87,6 +87,20 @@ bool Timeline::finished() {
   return started_ && at_ >= order_.size();
 }
 
+std::string Timeline::waiting_for() {
+  std::scoped_lock lock{mutex_};
+  if (!started_) return "its start";
+  if (at_ >= order_.size()) return "nothing: every sample is taken";
+  const auto& e = order_[at_];
+  const auto& t = topics_[e.slot];
+  std::string text = "sample " + std::to_string(e.index) + " of '" + t.name + "' (" + std::to_string(at_) + " of " +
+                     std::to_string(order_.size()) + " in all): ";
+  if (t.readers.empty()) return text + "no reader of '" + t.name + "'";
+  for (const auto r : t.readers)
+    text += "a reader given " + std::to_string(readers_[r].taken) + ", done with " + std::to_string(readers_[r].finished) + "; ";
+  return text;
+}
+
 void Timeline::advance() {
   // Entry at_ is done when its topic has readers and each has come back
   // after taking it.
@@ -100,8 +114,15 @@ void Timeline::advance() {
 }
 
 std::optional<Timeline::Released> Timeline::next(std::size_t reader, Clock::time_point deadline, const std::stop_token& stop) {
+  // A stop wakes the wait. The callback takes the lock, so it cannot slip
+  // between a look and the wait; it is made before the lock is taken and
+  // ends after it is let go, as it may run (and lock) at once.
+  std::stop_callback wake{stop, [this] {
+                            std::scoped_lock relock{mutex_};
+                            moved_.notify_all();
+                          }};
   std::unique_lock lock{mutex_};
-  auto& r = readers_[reader];
+  auto& r = readers_[reader];  // a deque: joins do not move it
   if (r.finished < r.taken) {  // it is back: done with what it took
     r.finished = r.taken;
     advance();
@@ -112,9 +133,9 @@ std::optional<Timeline::Released> Timeline::next(std::size_t reader, Clock::time
     return started_ && at_ < order_.size() && order_[at_].slot == r.slot && order_[at_].index == r.taken;
   };
   const auto until = std::min(deadline, Clock::now() + std::chrono::hours{24 * 365});  // a wait the clock can add
-  if (!moved_.wait_until(lock, stop, until, released)) {
+  while (!released()) {
     if (stop.stop_requested()) throw Failure{{Errc::stopped, "replay of '" + topic.name + "': stopped while waiting"}};
-    return std::nullopt;
+    if (moved_.wait_until(lock, until) == std::cv_status::timeout && !released()) return std::nullopt;
   }
   const auto i = r.taken++;
   return Released{topic.samples[i], topic.stamps[i]};

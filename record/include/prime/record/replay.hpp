@@ -63,6 +63,8 @@ class Replay {
   // Whether every sample has been released and taken, and its readers
   // have come back for more (so whatever they did with it is done).
   [[nodiscard]] bool finished() const { return timeline_->finished(); }
+  // What it waits for now, in words (a source made and never read, say).
+  [[nodiscard]] std::string waiting_for() const { return timeline_->waiting_for(); }
 
  private:
   std::shared_ptr<detail::Timeline> timeline_;

@@ -3,6 +3,7 @@
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
+#include <deque>
 #include <mutex>
 #include <optional>
 #include <span>
@@ -39,6 +40,8 @@ class Timeline {
   // Whether every sample has been taken and its readers have come back.
   [[nodiscard]] bool finished();
   [[nodiscard]] const std::string& path() const noexcept { return path_; }
+  // What it waits for now, in words: the sample due and its readers.
+  [[nodiscard]] std::string waiting_for();
 
   // The reader's next sample, waiting for its release until `deadline`
   // (none: nullopt) or a stop (Errc::stopped is thrown as Failure). The
@@ -72,9 +75,9 @@ class Timeline {
   std::string path_;
   std::int64_t steady_to_unix_ = 0;
   std::mutex mutex_;
-  std::condition_variable_any moved_;
-  std::vector<Topic> topics_;
-  std::vector<Reader> readers_;
+  std::condition_variable moved_;
+  std::deque<Topic> topics_;    // deques: a reader waiting holds references into them while others join
+  std::deque<Reader> readers_;
   std::vector<Entry> order_;
   std::size_t at_ = 0;  // the entry released now
   bool started_ = false;

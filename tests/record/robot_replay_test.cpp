@@ -1,0 +1,66 @@
+// The robot demo's planner chain on a recording the demo made
+// (examples/robot/drive.mcap: 3 s of its lidar and odometry, taken with
+// `prime record sensors/lidar sensors/odom`): replayed in one process, the
+// same commands on every run.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <vector>
+
+#include "prime/liberty.hpp"
+#include "prime/record/replay.hpp"
+#include "prime/topology.hpp"
+#include "robot/planning.hpp"
+
+namespace {
+
+using namespace std::chrono_literals;
+using Sensed = prime::Synced<robot::Scan, robot::Odometry>;
+
+std::vector<robot::MotorCommand> drive_once() {
+  prime::liberty::Core core;
+  prime::record::Replay replay{core, PRIME_ROBOT_RECORDING};
+  // As the planner links them: sync, then localize | plan | control.
+  auto sets = prime::sync(prime::approximate_time({.min_interval = {15ms, 5ms}}),
+                          replay.source<robot::Scan>("sensors/lidar"), replay.source<robot::Odometry>("sensors/odom"));
+  auto commands = sets | core.chain(robot::localize<Sensed>, "localize") | core.chain(robot::plan, "plan") |
+                  core.chain(robot::control, "control");
+  auto reader = commands.subscribe();
+  replay.start();
+  std::vector<robot::MotorCommand> out;
+  const auto give_up = prime::Clock::now() + 20s;
+  while (prime::Clock::now() < give_up) {
+    if (auto c = reader.read_for(10ms)) {
+      out.push_back(c->value);
+    } else if (replay.finished()) {
+      while (auto more = reader.try_read()) out.push_back(more->value);
+      break;
+    }
+  }
+  EXPECT_TRUE(replay.finished()) << "it waits for " << replay.waiting_for();
+  core.stop();
+  return out;
+}
+
+TEST(RobotReplay, ThePlannersChainOnTheDemosRecordingGivesTheSameCommandsOnEveryRun) {
+  const auto first = drive_once();
+  ASSERT_GE(first.size(), 110u) << "one command per scan (120), but for the last few";
+  for (std::size_t i = 0; i < first.size(); ++i) {
+    EXPECT_GE(first[i].speed, 0.0);
+    EXPECT_LE(first[i].speed, 1.0);
+    EXPECT_TRUE(std::isfinite(first[i].turn_rate));
+    if (i > 0) EXPECT_GT(first[i].sensor_stamp_ns, first[i - 1].sensor_stamp_ns) << "in the scans' order";
+  }
+  for (int run = 0; run < 3; ++run) {
+    const auto again = drive_once();
+    ASSERT_EQ(again.size(), first.size()) << "run " << run;
+    for (std::size_t i = 0; i < first.size(); ++i) {
+      EXPECT_EQ(again[i].speed, first[i].speed);
+      EXPECT_EQ(again[i].turn_rate, first[i].turn_rate);
+      EXPECT_EQ(again[i].sensor_stamp_ns, first[i].sensor_stamp_ns);
+    }
+  }
+}
+
+}  // namespace
