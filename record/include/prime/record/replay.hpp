@@ -152,7 +152,10 @@ class ReplaySource {
 };
 
 // One topic of a recording, played at once: `replay(core, "drive.mcap",
-// "sensors/lidar")` is a Source of T for a chain on one recorded topic.
+// "sensors/lidar")` is a Source of T. As with a live source, a chain
+// linked to it gives its outputs to the readers it has by then: to see
+// every output of a chain on a recording, use a Replay and start() it
+// once the chain's readers are subscribed.
 template <class T, class Core>
 [[nodiscard]] ReplaySource<T> replay(Core& core, const std::string& file, const std::string& topic) {
   const Replay recording{core, file};
