@@ -174,10 +174,7 @@ struct McapReader::State {
       if (first && op != kHeader) damaged("its first record is not a header (opcode " + std::to_string(op) + ")");
       const auto body = read(at + kRecordHead, length);
       Cursor r{body, "recording '" + path + "': the record at offset " + std::to_string(at)};
-      if (op == kHeader) {
-        summary.profile = r.string();
-        summary.library = r.string();
-      } else if (op == kSchema) {
+      if (op == kSchema) {  // the header, first, was read on opening
         auto s = parse_schema(r);
         summary.schemas[s.id] = std::move(s);
       } else if (op == kChannel) {

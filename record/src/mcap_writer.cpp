@@ -25,6 +25,30 @@ const char* compression_name(Compression c) noexcept {
   return "";
 }
 
+namespace {
+
+// A Schema's and a Channel's bodies: written into the data section as they
+// are added, and again into the summary.
+Bytes schema_body(const Schema& sc) {
+  Bytes b;
+  put<std::uint16_t>(b, sc.id);
+  put_string(b, sc.name);
+  put_string(b, sc.encoding);
+  put_string(b, sc.data);  // uint32-prefixed bytes, as a string is
+  return b;
+}
+Bytes channel_body(const Channel& ch) {
+  Bytes b;
+  put<std::uint16_t>(b, ch.id);
+  put<std::uint16_t>(b, ch.schema_id);
+  put_string(b, ch.topic);
+  put_string(b, ch.message_encoding);
+  put_string_map(b, ch.metadata);
+  return b;
+}
+
+}  // namespace
+
 struct McapWriter::State {
   std::string path;
   WriterOptions options;
@@ -136,12 +160,7 @@ std::uint16_t McapWriter::add_schema(const std::string& name, const std::string&
   if (s.closed) throw Failure{{Errc::invalid_argument, "recording '" + s.path + "': closed"}};
   const auto id = static_cast<std::uint16_t>(s.schemas.size() + 1);
   Schema schema{id, name, encoding, data};
-  Bytes body;
-  put<std::uint16_t>(body, id);
-  put_string(body, name);
-  put_string(body, encoding);
-  put_string(body, data);  // uint32-prefixed bytes, as a string is
-  s.data_record(kSchema, body);
+  s.data_record(kSchema, schema_body(schema));
   s.schemas[id] = std::move(schema);
   ++s.stats.schema_count;
   return id;
@@ -154,14 +173,9 @@ std::uint16_t McapWriter::add_channel(std::uint16_t schema_id, const std::string
   if (schema_id != 0 && !s.schemas.contains(schema_id))
     throw Failure{{Errc::invalid_argument, "recording '" + s.path + "': no schema " + std::to_string(schema_id)}};
   const auto id = static_cast<std::uint16_t>(s.channels.size() + 1);
-  Bytes body;
-  put<std::uint16_t>(body, id);
-  put<std::uint16_t>(body, schema_id);
-  put_string(body, topic);
-  put_string(body, message_encoding);
-  put_string_map(body, metadata);
-  s.data_record(kChannel, body);
-  s.channels[id] = Channel{id, schema_id, topic, message_encoding, metadata};
+  Channel channel{id, schema_id, topic, message_encoding, metadata};
+  s.data_record(kChannel, channel_body(channel));
+  s.channels[id] = std::move(channel);
   ++s.stats.channel_count;
   s.stats.channel_message_counts[id] = 0;
   return id;
@@ -227,25 +241,10 @@ void McapWriter::close() {
     if (summary.size() > from) groups.emplace_back(op, summary_start + from, summary.size() - from);
   };
   group(kSchema, [&] {
-    for (const auto& [id, sc] : s.schemas) {
-      Bytes b;
-      put<std::uint16_t>(b, id);
-      put_string(b, sc.name);
-      put_string(b, sc.encoding);
-      put_string(b, sc.data);
-      put_record(summary, kSchema, b);
-    }
+    for (const auto& [id, sc] : s.schemas) put_record(summary, kSchema, schema_body(sc));
   });
   group(kChannel, [&] {
-    for (const auto& [id, ch] : s.channels) {
-      Bytes b;
-      put<std::uint16_t>(b, id);
-      put<std::uint16_t>(b, ch.schema_id);
-      put_string(b, ch.topic);
-      put_string(b, ch.message_encoding);
-      put_string_map(b, ch.metadata);
-      put_record(summary, kChannel, b);
-    }
+    for (const auto& [id, ch] : s.channels) put_record(summary, kChannel, channel_body(ch));
   });
   group(kStatistics, [&] {
     const auto& st = s.stats;

@@ -5,11 +5,11 @@
 
 #include "prime/record/mcap_reader.hpp"
 
+
 namespace prime::record::detail {
 
-Timeline::Timeline(std::string path) : path_{std::move(path)} {
-  const McapReader reader{path_};
-  for (const auto& m : reader.summary().metadata)
+Timeline::Timeline(std::string path) : path_{std::move(path)}, reader_{std::make_unique<McapReader>(path_)} {
+  for (const auto& m : reader_->summary().metadata)
     if (m.name == "prime.clock")
       if (const auto v = m.values.find("steady_to_unix_ns"); v != m.values.end()) {
         try {
@@ -20,11 +20,12 @@ Timeline::Timeline(std::string path) : path_{std::move(path)} {
       }
 }
 
+Timeline::~Timeline() = default;
+
 std::size_t Timeline::add(const std::string& topic, const std::string& type, std::size_t size) {
   std::scoped_lock lock{mutex_};
   if (started_) throw Failure{{Errc::invalid_argument, "replay of '" + path_ + "': topic '" + topic + "' added after it started"}};
-  const McapReader reader{path_};
-  const auto& s = reader.summary();
+  const auto& s = reader_->summary();
   const auto channel = std::ranges::find(s.channels, topic, [](const auto& c) { return c.second.topic; });
   if (channel == s.channels.end()) throw Failure{{Errc::not_found, "recording '" + path_ + "' has no topic '" + topic + "'"}};
   const auto schema = s.schemas.find(channel->second.schema_id);
@@ -34,7 +35,7 @@ std::size_t Timeline::add(const std::string& topic, const std::string& type, std
                                             ", not " + type}};
   Topic t{topic, {}, {}, {}};
   const auto id = channel->first;
-  reader.for_each_message([&](const Message& m) {
+  reader_->for_each_message([&](const Message& m) {
     if (m.channel_id != id) return;
     if (m.data.size() != size)
       throw Failure{{Errc::damaged, "recording '" + path_ + "': a sample of '" + topic + "' is " + std::to_string(m.data.size()) +

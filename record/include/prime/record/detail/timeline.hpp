@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <span>
@@ -12,6 +13,10 @@
 #include <vector>
 
 #include "prime/logic/sample.hpp"
+
+namespace prime::record {
+class McapReader;
+}
 
 namespace prime::record::detail {
 
@@ -25,6 +30,7 @@ namespace prime::record::detail {
 class Timeline {
  public:
   explicit Timeline(std::string path);
+  ~Timeline();
 
   // Adds topic `topic`, recorded as `type` (a Fingerprint's describe()),
   // before start(); returns its place. Throws Failure: Errc::not_found (no
@@ -73,6 +79,7 @@ class Timeline {
   void advance();  // past every entry whose readers are done with it
 
   std::string path_;
+  std::unique_ptr<McapReader> reader_;  // opened once; each topic added reads its messages through it
   std::int64_t steady_to_unix_ = 0;
   std::mutex mutex_;
   std::condition_variable moved_;
