@@ -271,14 +271,16 @@ const Summary& McapReader::summary() const noexcept { return state_->summary; }
 bool McapReader::complete() const noexcept { return state_->complete; }
 
 void McapReader::for_each_message(const std::function<void(const Message&)>& visit) const {
+  for (const auto& chunk : state_->summary.chunks) for_each_message_in(chunk, visit);
+}
+
+void McapReader::for_each_message_in(const ChunkInfo& chunk, const std::function<void(const Message&)>& visit) const {
   const auto& s = *state_;
-  for (const auto& chunk : s.summary.chunks) {
-    const auto record = s.read(chunk.offset, chunk.length);
-    Cursor c{record, "recording '" + s.path + "': the chunk at offset " + std::to_string(chunk.offset)};
-    if (c.get<std::uint8_t>() != kChunk) s.damaged("the chunk index points at offset " + std::to_string(chunk.offset) + ", where no chunk is");
-    const auto body = c.take(c.get<std::uint64_t>());
-    s.for_each_in_chunk(s.chunk_records(body, chunk.offset), visit);
-  }
+  const auto record = s.read(chunk.offset, chunk.length);
+  Cursor c{record, "recording '" + s.path + "': the chunk at offset " + std::to_string(chunk.offset)};
+  if (c.get<std::uint8_t>() != kChunk) s.damaged("the chunk index points at offset " + std::to_string(chunk.offset) + ", where no chunk is");
+  const auto body = c.take(c.get<std::uint64_t>());
+  s.for_each_in_chunk(s.chunk_records(body, chunk.offset), visit);
 }
 
 }  // namespace prime::record

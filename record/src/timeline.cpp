@@ -4,21 +4,14 @@
 #include <algorithm>
 
 #include "prime/record/mcap_reader.hpp"
-
+#include "prime/record/prime_metadata.hpp"
 
 namespace prime::record::detail {
 
-Timeline::Timeline(std::string path) : path_{std::move(path)}, reader_{std::make_unique<McapReader>(path_)} {
-  for (const auto& m : reader_->summary().metadata)
-    if (m.name == "prime.clock")
-      if (const auto v = m.values.find("steady_to_unix_ns"); v != m.values.end()) {
-        try {
-          steady_to_unix_ = std::stoll(v->second);
-        } catch (const std::exception&) {
-          throw Failure{{Errc::damaged, "recording '" + path_ + "': its clock offset '" + v->second + "' is no number"}};
-        }
-      }
-}
+Timeline::Timeline(std::string path)
+    : path_{std::move(path)},
+      reader_{std::make_unique<McapReader>(path_)},
+      steady_to_unix_{steady_to_unix_ns(reader_->summary(), path_)} {}
 
 Timeline::~Timeline() = default;
 

@@ -17,10 +17,10 @@
 #include <vector>
 
 #include "json.hpp"
+#include "tool_runs.hpp"
 #include "optimus/support/redis_server.hpp"
 #include "prime/optimus.hpp"
 #include "prime/optimus/detail/connection.hpp"
-#include "prime/record/mcap_reader.hpp"
 #include "prime/shm.hpp"
 #include "prime/shm/detail/service_layout.hpp"
 #include "shm/domain.hpp"
@@ -34,24 +34,6 @@ namespace {
 
 using namespace std::chrono_literals;
 
-struct Run {
-  int code;
-  std::string out;
-};
-
-// The command `argv`, to its end.
-Run finished(std::vector<std::string> argv) {
-  auto process = PeerProcess::command(std::move(argv), true);
-  auto out = process.all_output();
-  return {process.exit_code().value_or(-1), out};
-}
-
-// `prime --domain <domain> <args...>`, to its end.
-Run prime(const std::string& domain, std::vector<std::string> args) {
-  args.insert(args.begin(), {PRIME_TOOL_PATH, "--domain", domain});
-  return finished(std::move(args));
-}
-
 // `argv` run as user nobody.
 std::vector<std::string> as_nobody(std::vector<std::string> argv) {
   argv.insert(argv.begin(), {"setpriv", "--reuid=nobody", "--regid=nogroup", "--clear-groups"});
@@ -62,19 +44,6 @@ std::vector<std::string> as_nobody(std::vector<std::string> argv) {
 Run prime_as_nobody(std::vector<std::string> args) {
   args.insert(args.begin(), PRIME_TOOL_PATH);
   return finished(as_nobody(std::move(args)));
-}
-
-// The last line of `text` that starts with '{' or '[', as JSON.
-tool::Json last_json(const std::string& text) {
-  std::string last;
-  std::size_t at = 0;
-  while (at < text.size()) {
-    const auto nl = text.find('\n', at);
-    const auto line = text.substr(at, nl == std::string::npos ? std::string::npos : nl - at);
-    if (!line.empty() && (line[0] == '{' || line[0] == '[')) last = line;
-    at = nl == std::string::npos ? text.size() : nl + 1;
-  }
-  return tool::parse_json(last);
 }
 
 // The last line of `text` that is a JSON object with `key` (a watch
@@ -104,8 +73,6 @@ std::string killed_domain(const std::string& stem) {
   return dead;
 }
 
-double number(const tool::Json& j, const std::string& key) { return std::get<double>(j.object().at(key).value); }
-std::string text(const tool::Json& j, const std::string& key) { return std::get<std::string>(j.object().at(key).value); }
 
 TEST(PrimeTool, LsAndInfoShowATopicAndAServiceOfRunningPeersWithTypesAndPids) {
   const auto domain = unique_domain("tool-ls");
@@ -726,108 +693,5 @@ TEST(PrimeTool, LsShowsAnOptimusDomainsSourcesAndServicesAndTheWatchCommandsRead
 
 // prime record: a publisher's samples into an MCAP file, every one, with
 // its stamp as log_time; prime record info says what the file holds.
-TEST(PrimeToolRecord, RecordsEveryTickOfAPublisherAndInfoCountsThem) {
-  const auto domain = unique_domain("tool-record");
-  PeerProcess ticks{{"ticks", domain, "tool/ticks", "500", "0"}};
-  ASSERT_TRUE(ticks.says("publishing"));
-  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
-  const auto recorded = prime(domain, {"record", "tool/ticks", "-o", file, "-n", "300", "--compression", "lz4"});
-  ASSERT_EQ(recorded.code, 0) << recorded.out;
-  EXPECT_NE(recorded.out.find("recorded 300 samples of 'tool/ticks'"), std::string::npos) << recorded.out;
-
-  record::McapReader reader{file};
-  ASSERT_TRUE(reader.complete());
-  const auto& summary = reader.summary();
-  ASSERT_EQ(summary.channels.size(), 1u);
-  const auto& channel = summary.channels.begin()->second;
-  EXPECT_EQ(channel.topic, "tool/ticks");
-  EXPECT_NE(summary.schemas.at(channel.schema_id).name.find("Tick"), std::string::npos);
-  EXPECT_NE(summary.schemas.at(channel.schema_id).data.find("tag"), std::string::npos);  // the type's description
-  EXPECT_EQ(summary.statistics.message_count, 300u);
-  // Every sample is in the file or counted lost (overwritten before the
-  // recorder read it: a drop_oldest topic on a loaded machine).
-  std::optional<std::uint64_t> previous;
-  std::uint64_t gaps = 0, last_time = 0;
-  reader.for_each_message([&](const record::Message& m) {
-    ASSERT_EQ(m.data.size(), sizeof(test::Tick));
-    test::Tick tick;
-    std::memcpy(&tick, m.data.data(), sizeof tick);
-    if (previous) {
-      ASSERT_GT(tick.n, *previous);
-      gaps += tick.n - *previous - 1;
-    }
-    previous = tick.n;
-    EXPECT_GT(m.log_time, last_time);
-    EXPECT_GE(m.publish_time, m.log_time);  // arrival, after the stamp
-    last_time = m.log_time;
-  });
-  ASSERT_EQ(summary.metadata.size(), 2u);  // the clock's offset, and the losses
-  EXPECT_EQ(summary.metadata[1].name, "prime.losses");
-  EXPECT_EQ(summary.metadata[1].values.at("tool/ticks"), std::to_string(gaps));
-  const auto info = prime(domain, {"--json", "record", "info", file});
-  ASSERT_EQ(info.code, 0) << info.out;
-  const auto json = last_json(info.out);
-  EXPECT_EQ(number(json, "messages"), 300);
-  EXPECT_EQ(text(json, "compression"), "lz4");
-  const auto& topic = json.object().at("topics").array().at(0);
-  EXPECT_EQ(text(topic, "topic"), "tool/ticks");
-  EXPECT_EQ(number(topic, "lost"), static_cast<double>(gaps));
-  EXPECT_NEAR(number(topic, "rate"), 500, 100);
-  std::filesystem::remove(file);
-}
-
-// A recorder killed with -9 leaves a file that is read up to its last
-// complete chunk, and says it was cut short.
-TEST(PrimeToolRecord, ARecorderKilledMidFileLeavesWhatItWroteReadable) {
-  const auto domain = unique_domain("tool-record-kill");
-  PeerProcess ticks{{"ticks", domain, "tool/ticks", "1000", "0"}};
-  ASSERT_TRUE(ticks.says("publishing"));
-  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
-  auto recorder = PeerProcess::command(
-      {PRIME_TOOL_PATH, "--domain", domain, "record", "--all", "-o", file, "--chunk-size", "1024"}, true);
-  // Until a few chunks are in the file (each about 1 KiB of messages).
-  ASSERT_TRUE(within(30s, [&] { return std::filesystem::exists(file) && std::filesystem::file_size(file) > 8 * 1024; }));
-  recorder.kill9();
-  record::McapReader reader{file};
-  EXPECT_FALSE(reader.complete());
-  EXPECT_GE(reader.summary().chunks.size(), 4u);
-  std::uint64_t n = 0;
-  std::optional<std::uint64_t> previous;
-  reader.for_each_message([&](const record::Message& m) {
-    test::Tick tick;
-    ASSERT_EQ(m.data.size(), sizeof tick);
-    std::memcpy(&tick, m.data.data(), sizeof tick);
-    if (previous) EXPECT_GT(tick.n, *previous);  // in order, whole: nothing of a cut chunk is read
-    previous = tick.n;
-    ++n;
-  });
-  EXPECT_EQ(n, reader.summary().statistics.message_count);
-  EXPECT_GT(n, 50u);
-  const auto info = prime(domain, {"record", "info", file});
-  EXPECT_EQ(info.code, 0) << info.out;
-  EXPECT_NE(info.out.find("cut short"), std::string::npos) << info.out;
-  std::filesystem::remove(file);
-}
-
-TEST(PrimeToolRecord, BadFilesAndOptionsAreRefusedByName) {
-  const auto domain = unique_domain("tool-record-bad");
-  PeerProcess ticks{{"ticks", domain, "tool/ticks", "100", "0"}};
-  ASSERT_TRUE(ticks.says("publishing"));
-  const auto missing = prime(domain, {"record", "info", "/nonexistent/x.mcap"});
-  EXPECT_EQ(missing.code, 3) << missing.out;
-  const auto foreign_file = std::filesystem::temp_directory_path() / (domain + ".txt");
-  { std::ofstream{foreign_file} << "hello\n"; }
-  const auto foreign = prime(domain, {"record", "info", foreign_file});
-  EXPECT_EQ(foreign.code, 2) << foreign.out;
-  EXPECT_NE(foreign.out.find("is not an MCAP file"), std::string::npos) << foreign.out;
-  std::filesystem::remove(foreign_file);
-  const auto no_file = prime(domain, {"record", "tool/ticks"});
-  EXPECT_EQ(no_file.code, 2) << no_file.out;
-  EXPECT_NE(no_file.out.find("-o FILE.mcap"), std::string::npos) << no_file.out;
-  const auto no_topic = prime(domain, {"record", "tool/nothing", "-o", "/tmp/never.mcap"});
-  EXPECT_EQ(no_topic.code, 3) << no_topic.out;
-  EXPECT_NE(no_topic.out.find("no topic 'tool/nothing'"), std::string::npos) << no_topic.out;
-}
-
 }  // namespace
 }  // namespace prime::test

@@ -27,6 +27,7 @@
 #include "prime/logic/error.hpp"
 #include "bench/command.hpp"
 #include "json.hpp"
+#include "play_command.hpp"
 #include "record_commands.hpp"
 #include "shm_commands.hpp"
 
@@ -170,14 +171,31 @@ int main(int argc, char** argv) {
   auto* info_of_recording = record->add_subcommand("info", "what a recording holds: topics, types, counts, rates, losses");
   info_of_recording->add_option("file", recording, "the MCAP file")->required();
   info_of_recording->callback([&] { run = [&] { return record_info(o, recording); }; });
-  record->callback([&, info_of_recording, redis] {
-    if (info_of_recording->parsed()) return;
+  std::string recovered;
+  auto* recover = record->add_subcommand("recover", "rewrite a recording whose recorder died, with an index and a summary");
+  recover->add_option("file", recording, "the MCAP file cut short")->required();
+  recover->add_option("-o,--output", recovered, "the MCAP file to write")->required();
+  recover->callback([&] { run = [&] { return record_recover(recording, recovered); }; });
+  record->callback([&, info_of_recording, recover, redis] {
+    if (info_of_recording->parsed() || recover->parsed()) return;
     run = redis ? std::function<int()>{[] {
       std::cerr << "prime: record is for shared-memory domains (recording Optimus sources is not built yet)\n";
       return int{kUsage};
     }}
                 : std::function<int()>{[&] { return shm_record(o, rec); }};
   });
+  PlayOptions play_options;
+  auto* play = command("play", "publish recordings into the domain at their recorded timing, as one timeline",
+                       [&] { return shm_play(o, play_options); });
+  play->add_option("files", play_options.files, "the MCAP files")->required();
+  play->add_option("--rate", play_options.rate, "times the recorded speed (default 1), or max: as fast as the readers take them");
+  play->add_flag("--loop", play_options.loop, "again from the start, until Ctrl-C");
+  play->add_option("--start", play_options.start, "seconds into the recordings to start at (found by their index)")->check(seconds);
+  play->add_option("--duration", play_options.duration, "seconds of the recordings to play (default: to their end)")->check(seconds);
+  play->add_option("--topics", play_options.topics, "only these recorded topics");
+  play->add_option("--remap", play_options.remaps, "recorded:=published, publish a topic under another name");
+  play->add_option("--stamps", play_options.stamps, "the samples' stamps: now (when published, the default) or keep (as recorded)")
+      ->check(CLI::IsMember({"now", "keep"}));
   bench::Options b;
   auto* bench = command("bench", "measure what each hop costs, against the floors and the peers: a report folder",
                         [&] {

@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -15,6 +16,7 @@
 #include "json.hpp"
 #include "prime/record/mcap_reader.hpp"
 #include "prime/record/mcap_writer.hpp"
+#include "prime/record/prime_metadata.hpp"
 #include "prime/shm.hpp"
 #include "stats.hpp"
 #include "table.hpp"
@@ -25,10 +27,6 @@ namespace {
 
 using namespace std::chrono_literals;
 namespace rec = prime::record;
-
-// What a recording's channels say of their topics, in its metadata.
-constexpr auto kLosses = "prime.losses";  // per topic: samples overwritten before the recorder read them
-constexpr auto kClock = "prime.clock";    // steady_to_unix_ns: what was added to each steady stamp
 
 rec::Compression compression_named(const std::string& name) {
   if (name == "none") return rec::Compression::none;
@@ -67,7 +65,7 @@ int shm_record(const Options& o, const RecordOptions& r) {
   const auto steady_to_unix = std::chrono::duration_cast<std::chrono::nanoseconds>(
                                   std::chrono::system_clock::now().time_since_epoch() - Clock::now().time_since_epoch())
                                   .count();
-  file.add_metadata(kClock, {{"steady_to_unix_ns", std::to_string(steady_to_unix)}});
+  file.add_metadata(rec::kClockMetadata, {{"steady_to_unix_ns", std::to_string(steady_to_unix)}});
   std::vector<std::unique_ptr<Recorded>> recorded;
   std::set<std::string> known;
   std::map<std::string, std::uint16_t> schemas;
@@ -87,12 +85,12 @@ int shm_record(const Options& o, const RecordOptions& r) {
       known.insert(t.name);
       auto schema = schemas.find(t.type);
       if (schema == schemas.end()) schema = schemas.emplace(t.type, file.add_schema(t.type, "prime", t.schema)).first;
-      const auto channel = file.add_channel(
-          schema->second, t.name, "prime-raw",
-          {{"type", t.type},
-           {"capacity", std::to_string(t.qos.capacity)},
-           {"max_message_size", std::to_string(t.qos.max_message_size)},
-           {"overflow", t.qos.overflow == Overflow::block ? "block" : "drop_oldest"}});
+      auto metadata = rec::fingerprint_metadata(t.fingerprint);
+      metadata.insert({{"type", t.type},
+                       {"capacity", std::to_string(t.qos.capacity)},
+                       {"max_message_size", std::to_string(t.qos.max_message_size)},
+                       {"overflow", t.qos.overflow == Overflow::block ? "block" : "drop_oldest"}});
+      const auto channel = file.add_channel(schema->second, t.name, "prime-raw", metadata);
       recorded.push_back(std::make_unique<Recorded>(Recorded{t.name, core.observe(t.name), channel}));
     }
   };
@@ -130,7 +128,7 @@ int shm_record(const Options& o, const RecordOptions& r) {
   }
   std::map<std::string, std::string> losses;
   for (const auto& t : recorded) losses[t->topic] = std::to_string(t->reader.lost());
-  file.add_metadata(kLosses, losses);
+  file.add_metadata(rec::kLossesMetadata, losses);
   file.close();
   for (const auto& t : recorded)
     std::cerr << "prime: recorded " << t->written << " samples of '" << t->topic << "', lost " << t->reader.lost() << '\n';
@@ -144,7 +142,7 @@ int record_info(const Options& o, const std::string& path) {
   const auto& s = reader.summary();
   std::map<std::string, std::string> losses;
   for (const auto& m : s.metadata)
-    if (m.name == kLosses) losses = m.values;
+    if (m.name == rec::kLossesMetadata) losses = m.values;
   const auto& st = s.statistics;
   const double seconds = st.message_count > 1 ? static_cast<double>(st.message_end_time - st.message_start_time) / 1e9 : 0.0;
   std::set<std::string> compressions;
@@ -198,6 +196,41 @@ int record_info(const Options& o, const std::string& path) {
                lost_of(ch)});
   }
   table.print(std::cout);
+  return kOk;
+}
+
+int record_recover(const std::string& path, const std::string& out) {
+  if (out.empty()) throw Failure{{Errc::invalid_argument, "record recover: no file to write given (-o FILE.mcap)"}};
+  std::error_code ignored;
+  if (std::filesystem::equivalent(path, out, ignored))
+    throw Failure{{Errc::invalid_argument, "record recover: '" + out + "' is the recording itself: write it elsewhere"}};
+  const rec::McapReader reader{path};
+  const auto& s = reader.summary();
+  const auto compression = s.chunks.empty() || s.chunks.front().compression.empty() ? rec::Compression::none
+                           : s.chunks.front().compression == "lz4"                   ? rec::Compression::lz4
+                                                                                      : rec::Compression::zstd;
+  rec::McapWriter file{out, {.compression = compression, .chunk_size = 1 << 20, .profile = s.profile}};
+  std::map<std::uint16_t, std::uint16_t> schemas, channels;
+  for (const auto& [id, schema] : s.schemas) schemas[id] = file.add_schema(schema.name, schema.encoding, schema.data);
+  for (const auto& [id, ch] : s.channels)
+    channels[id] = file.add_channel(ch.schema_id == 0 ? 0 : schemas.at(ch.schema_id), ch.topic, ch.message_encoding, ch.metadata);
+  for (const auto& m : s.metadata) file.add_metadata(m.name, m.values);
+  std::uint64_t copied = 0, orphans = 0;
+  reader.for_each_message([&](const rec::Message& m) {
+    const auto to = channels.find(m.channel_id);
+    if (to == channels.end()) {  // of a channel the file never described: nothing could read it
+      ++orphans;
+      return;
+    }
+    file.write(to->second, m.sequence, m.log_time, m.publish_time, m.data);
+    ++copied;
+  });
+  file.close();
+  std::cerr << "prime: " << path << (reader.complete() ? " was complete already" : " was cut short") << "; " << copied
+            << " messages of " << s.channels.size() << " topics in " << s.chunks.size() << " complete chunks written to "
+            << out << " with an index and a summary";
+  if (orphans > 0) std::cerr << "; " << orphans << " messages of channels it never described left out";
+  std::cerr << '\n';
   return kOk;
 }
 

@@ -22,5 +22,8 @@ struct RecordOptions {
 
 int shm_record(const Options& o, const RecordOptions& r);
 int record_info(const Options& o, const std::string& file);
+// A recording whose writer died (no summary, a chunk cut short) rewritten
+// whole into `out`: its complete chunks, with an index and a summary.
+int record_recover(const std::string& file, const std::string& out);
 
 }  // namespace prime::tool

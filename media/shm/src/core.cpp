@@ -105,6 +105,19 @@ Publisher<Bytes> Core::raw_publisher(const std::string& name) {
   return Publisher<Bytes>{std::move(topic), std::chrono::milliseconds{1000}, PublishFence::full, {}};
 }
 
+Publisher<Bytes> Core::raw_publisher(const std::string& name, const Fingerprint& type, const std::string& schema,
+                                     TopicQos qos) {
+  const auto timeout = qos.block_timeout;
+  // An existing topic is published on with its own QoS; a new one is made
+  // with `qos` (a byte topic's has its max_message_size already).
+  auto topic = detail::Topic::inspect(registry_, name);
+  if (!topic) topic = open_topic(name, type, type == Fingerprint::of<Bytes>(), qos, schema, "publisher").topic;
+  if (!(topic->header().type == type))
+    throw Failure{{Errc::type_mismatch, "topic '" + name + "' carries " + topic->header().type.describe() + ", not " +
+                                            type.describe()}};
+  return Publisher<Bytes>{std::move(topic), timeout, PublishFence::full, {}};
+}
+
 ServiceChain<Bytes, Bytes> Core::raw_chain(const std::string& name, ClientQos qos) {
   auto service = detail::Service::open_existing(registry_, name);
   if (!service) throw Failure{{Errc::not_found, "no service '" + name + "' in shm domain '" + domain() + "'"}};

@@ -31,6 +31,9 @@ class McapReader {
   // Every message, chunk by chunk in the file's order, each chunk's
   // messages in the order written.
   void for_each_message(const std::function<void(const Message&)>& visit) const;
+  // The messages of one chunk of the summary, in the order written: what
+  // a reader that seeks by the chunk index reads, and nothing else.
+  void for_each_message_in(const ChunkInfo& chunk, const std::function<void(const Message&)>& visit) const;
 
  private:
   struct State;

@@ -202,6 +202,13 @@ class Core : public ErasedChainRuntime {
   // (the type's size, laid out as its description says). The topic must
   // exist (its type is its own) and have no live publisher.
   [[nodiscard]] Publisher<Bytes> raw_publisher(const std::string& name);
+  // For tools: the same on topic `name` of type `type` (as a snapshot's
+  // fingerprint gives it), which is opened with `schema` and `qos` if no
+  // one has opened it yet (as `prime play` does with what a recording says
+  // of its topics). Throws Errc::type_mismatch when the topic carries
+  // another type, and as publisher() does.
+  [[nodiscard]] Publisher<Bytes> raw_publisher(const std::string& name, const Fingerprint& type, const std::string& schema,
+                                               TopicQos qos);
 
   // For tools: a raw-byte handle on service `name`, whatever its types.
   [[nodiscard]] ServiceChain<Bytes, Bytes> raw_chain(const std::string& name, ClientQos qos = {});

@@ -4,6 +4,7 @@
 #include <string>
 #include <vector>
 
+#include "prime/common/fingerprint.hpp"
 #include "prime/shm/qos.hpp"
 #include "prime/topology/loop.hpp"
 
@@ -26,6 +27,7 @@ struct RegistrySnapshot {
     std::vector<std::uint32_t> subscriber_pids;
     std::uint64_t published;  // sequences so far
     std::string schema;       // its type's description (prime::schema_of)
+    Fingerprint fingerprint;  // its type's, whole: what a topic made again with this type must carry
   };
   struct Service {
     std::string name;

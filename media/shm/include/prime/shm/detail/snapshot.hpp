@@ -38,7 +38,7 @@ inline RegistrySnapshot snapshot(const std::shared_ptr<Registry>& registry) {
     auto topic = inspect_or_skip(registry, name);
     if (!topic) continue;
     auto& h = topic->header();
-    RegistrySnapshot::Topic t{name, h.type.describe(), topic->qos(), 0, {}, {}, h.head.load(), read_text(h.schema)};
+    RegistrySnapshot::Topic t{name, h.type.describe(), topic->qos(), 0, {}, {}, h.head.load(), read_text(h.schema), h.type};
     if (const auto publisher = h.publisher.load(); registry->alive(publisher)) {
       t.publisher_pid = registry->pid_of(publisher);
       t.publisher = registry->name_of(publisher);

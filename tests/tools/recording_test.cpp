@@ -1,0 +1,370 @@
+// prime record, record info, record recover and play against real
+// processes: what is recorded is what was published, and what is played
+// is what was recorded, at its timing, in its order, with its stamps.
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <chrono>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "prime/record/mcap_reader.hpp"
+#include "prime/record/prime_metadata.hpp"
+#include "prime/shm.hpp"
+#include "shm/domain.hpp"
+#include "shm/messages.hpp"
+#include "shm/peer_process.hpp"
+#include "support/within.hpp"
+#include "tool_runs.hpp"
+
+namespace prime::test {
+namespace {
+
+using namespace std::chrono_literals;
+
+// A topic its reader never loses a sample of: the player waits for it.
+constexpr shm::TopicQos kLossless{.capacity = 256, .overflow = Overflow::block, .block_timeout = 10s};
+
+// A tick as recorded: its number, and its stamp as published.
+struct Recorded {
+  std::uint64_t n;
+  Clock::time_point stamp;
+  std::uint64_t log_time;
+  friend bool operator==(const Recorded&, const Recorded&) = default;
+};
+
+// The ticks in `file`, in the order written.
+std::vector<Recorded> ticks_in(const std::filesystem::path& file) {
+  record::McapReader reader{file};
+  const auto offset = record::steady_to_unix_ns(reader.summary(), file);
+  std::vector<Recorded> out;
+  reader.for_each_message([&](const record::Message& m) {
+    Tick tick;
+    if (m.data.size() != sizeof tick) throw std::runtime_error{"not a tick"};
+    std::memcpy(&tick, m.data.data(), sizeof tick);
+    out.push_back({tick.n, Clock::time_point{std::chrono::nanoseconds{static_cast<std::int64_t>(m.log_time) - offset}}, m.log_time});
+  });
+  return out;
+}
+
+// The next `n` ticks `reader` reads (fewer, when one is not there within 10 s).
+template <class Reader>
+std::vector<Recorded> ticks_read(Reader& reader, std::size_t n) {
+  std::vector<Recorded> out;
+  while (out.size() < n) {
+    auto s = reader.read_for(10s);
+    if (!s) break;
+    out.push_back({s->value->n, s->stamp, 0});
+  }
+  return out;
+}
+
+// `n` ticks of a 500 Hz publisher recorded into `file` (chunks of `chunk` bytes).
+void record_ticks(const std::string& domain, const std::filesystem::path& file, std::size_t n, const std::string& chunk = "1048576") {
+  const auto r = prime(domain, {"record", "tool/ticks", "-o", file, "-n", std::to_string(n), "--chunk-size", chunk});
+  if (r.code != 0) throw std::runtime_error{"record failed: " + r.out};
+}
+
+TEST(PrimeToolRecord, RecordsEveryTickOfAPublisherAndInfoCountsThem) {
+  const auto domain = unique_domain("tool-record");
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "500", "0"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
+  const auto recorded = prime(domain, {"record", "tool/ticks", "-o", file, "-n", "300", "--compression", "lz4"});
+  ASSERT_EQ(recorded.code, 0) << recorded.out;
+  EXPECT_NE(recorded.out.find("recorded 300 samples of 'tool/ticks'"), std::string::npos) << recorded.out;
+
+  record::McapReader reader{file};
+  ASSERT_TRUE(reader.complete());
+  const auto& summary = reader.summary();
+  ASSERT_EQ(summary.channels.size(), 1u);
+  const auto& channel = summary.channels.begin()->second;
+  EXPECT_EQ(channel.topic, "tool/ticks");
+  EXPECT_NE(summary.schemas.at(channel.schema_id).name.find("Tick"), std::string::npos);
+  EXPECT_NE(summary.schemas.at(channel.schema_id).data.find("tag"), std::string::npos);  // the type's description
+  EXPECT_EQ(record::recorded_fingerprint(summary, channel, file), Fingerprint::of<test::Tick>());  // to make its topic again
+  EXPECT_EQ(summary.statistics.message_count, 300u);
+  // Every sample is in the file or counted lost (overwritten before the
+  // recorder read it: a drop_oldest topic on a loaded machine).
+  std::optional<std::uint64_t> previous;
+  std::uint64_t gaps = 0, last_time = 0;
+  reader.for_each_message([&](const record::Message& m) {
+    ASSERT_EQ(m.data.size(), sizeof(test::Tick));
+    test::Tick tick;
+    std::memcpy(&tick, m.data.data(), sizeof tick);
+    if (previous) {
+      ASSERT_GT(tick.n, *previous);
+      gaps += tick.n - *previous - 1;
+    }
+    previous = tick.n;
+    EXPECT_GT(m.log_time, last_time);
+    EXPECT_GE(m.publish_time, m.log_time);  // arrival, after the stamp
+    last_time = m.log_time;
+  });
+  ASSERT_EQ(summary.metadata.size(), 2u);  // the clock's offset, and the losses
+  EXPECT_EQ(summary.metadata[1].name, "prime.losses");
+  EXPECT_EQ(summary.metadata[1].values.at("tool/ticks"), std::to_string(gaps));
+  const auto info = prime(domain, {"--json", "record", "info", file});
+  ASSERT_EQ(info.code, 0) << info.out;
+  const auto json = last_json(info.out);
+  EXPECT_EQ(number(json, "messages"), 300);
+  EXPECT_EQ(text(json, "compression"), "lz4");
+  const auto& topic = json.object().at("topics").array().at(0);
+  EXPECT_EQ(text(topic, "topic"), "tool/ticks");
+  EXPECT_EQ(number(topic, "lost"), static_cast<double>(gaps));
+  EXPECT_NEAR(number(topic, "rate"), 500, 100);
+  std::filesystem::remove(file);
+}
+
+// A recorder killed with -9 leaves a file that is read and played up to
+// its last complete chunk, says it was cut short, and is recovered whole.
+TEST(PrimeToolRecord, ARecorderKilledMidFileLeavesAFileThatIsReadPlayedAndRecovered) {
+  const auto domain = unique_domain("tool-record-kill");
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "1000", "0"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
+  auto recorder = PeerProcess::command(
+      {PRIME_TOOL_PATH, "--domain", domain, "record", "--all", "-o", file, "--chunk-size", "1024"}, true);
+  // Until a few chunks are in the file (each about 1 KiB of messages).
+  ASSERT_TRUE(within(30s, [&] { return std::filesystem::exists(file) && std::filesystem::file_size(file) > 8 * 1024; }));
+  recorder.kill9();
+  record::McapReader reader{file};
+  EXPECT_FALSE(reader.complete());
+  EXPECT_GE(reader.summary().chunks.size(), 4u);
+  std::uint64_t n = 0;
+  std::optional<std::uint64_t> previous;
+  reader.for_each_message([&](const record::Message& m) {
+    test::Tick tick;
+    ASSERT_EQ(m.data.size(), sizeof tick);
+    std::memcpy(&tick, m.data.data(), sizeof tick);
+    if (previous) {
+      EXPECT_GT(tick.n, *previous);  // in order, whole: nothing of a cut chunk is read
+    }
+    previous = tick.n;
+    ++n;
+  });
+  EXPECT_EQ(n, reader.summary().statistics.message_count);
+  EXPECT_GT(n, 50u);
+  const auto info = prime(domain, {"record", "info", file});
+  EXPECT_EQ(info.code, 0) << info.out;
+  EXPECT_NE(info.out.find("cut short"), std::string::npos) << info.out;
+
+  // Played: every complete chunk's samples.
+  shm::Core core{domain};
+  auto played = core.subscribe<Tick>("tool/played", {}, kLossless).subscribe();
+  const auto play = prime(domain, {"play", file, "--rate", "max", "--remap", "tool/ticks:=tool/played"});
+  EXPECT_EQ(play.code, 0) << play.out;
+  EXPECT_EQ(ticks_read(played, n).size(), n);
+
+  // Recovered: the same messages, now with an index and a summary.
+  const auto recovered = std::filesystem::temp_directory_path() / (domain + "-recovered.mcap");
+  const auto recover = prime(domain, {"record", "recover", file, "-o", recovered});
+  ASSERT_EQ(recover.code, 0) << recover.out;
+  EXPECT_NE(recover.out.find("was cut short; " + std::to_string(n) + " messages"), std::string::npos) << recover.out;
+  record::McapReader whole{recovered};
+  EXPECT_TRUE(whole.complete());
+  EXPECT_EQ(whole.summary().statistics.message_count, n);
+  EXPECT_EQ(whole.summary().channels.size(), reader.summary().channels.size());
+  EXPECT_EQ(ticks_in(recovered), ticks_in(file));
+  const auto same = prime(domain, {"record", "recover", file, "-o", file});
+  EXPECT_EQ(same.code, 2) << same.out;
+  std::filesystem::remove(file);
+  std::filesystem::remove(recovered);
+}
+
+TEST(PrimeToolRecord, BadFilesAndOptionsAreRefusedByName) {
+  const auto domain = unique_domain("tool-record-bad");
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "100", "0"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  const auto missing = prime(domain, {"record", "info", "/nonexistent/x.mcap"});
+  EXPECT_EQ(missing.code, 3) << missing.out;
+  const auto foreign_file = std::filesystem::temp_directory_path() / (domain + ".txt");
+  { std::ofstream{foreign_file} << "hello\n"; }
+  const auto foreign = prime(domain, {"record", "info", foreign_file});
+  EXPECT_EQ(foreign.code, 2) << foreign.out;
+  EXPECT_NE(foreign.out.find("is not an MCAP file"), std::string::npos) << foreign.out;
+  std::filesystem::remove(foreign_file);
+  const auto no_file = prime(domain, {"record", "tool/ticks"});
+  EXPECT_EQ(no_file.code, 2) << no_file.out;
+  EXPECT_NE(no_file.out.find("-o FILE.mcap"), std::string::npos) << no_file.out;
+  const auto no_topic = prime(domain, {"record", "tool/nothing", "-o", "/tmp/never.mcap"});
+  EXPECT_EQ(no_topic.code, 3) << no_topic.out;
+  EXPECT_NE(no_topic.out.find("no topic 'tool/nothing'"), std::string::npos) << no_topic.out;
+
+  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
+  ASSERT_EQ(prime(domain, {"record", "tool/ticks", "-o", file, "-n", "20"}).code, 0);
+  const auto play_missing = prime(domain, {"play", "/nonexistent/x.mcap"});
+  EXPECT_EQ(play_missing.code, 3) << play_missing.out;
+  const auto unknown_topic = prime(domain, {"play", file, "--topics", "tool/nothing"});
+  EXPECT_EQ(unknown_topic.code, 3) << unknown_topic.out;
+  EXPECT_NE(unknown_topic.out.find("no topic 'tool/nothing' in the recordings"), std::string::npos) << unknown_topic.out;
+  const auto bad_remap = prime(domain, {"play", file, "--remap", "tool/ticks=tool/x"});
+  EXPECT_EQ(bad_remap.code, 2) << bad_remap.out;
+  EXPECT_NE(bad_remap.out.find("is not recorded:=published"), std::string::npos) << bad_remap.out;
+  const auto bad_rate = prime(domain, {"play", file, "--rate", "0"});
+  EXPECT_EQ(bad_rate.code, 2) << bad_rate.out;
+  EXPECT_NE(bad_rate.out.find("--rate '0'"), std::string::npos) << bad_rate.out;
+  const auto past_end = prime(domain, {"play", file, "--start", "3600"});
+  EXPECT_EQ(past_end.code, 2) << past_end.out;
+  EXPECT_NE(past_end.out.find("past the recordings' end"), std::string::npos) << past_end.out;
+  // The recorder's topic, live and carrying its type, is another's to publish on.
+  const auto taken = prime(domain, {"play", file});
+  EXPECT_EQ(taken.code, 1) << taken.out;
+  EXPECT_NE(taken.out.find("topic 'tool/ticks' already has a publisher"), std::string::npos) << taken.out;
+  // A topic of another type is never published on.
+  shm::Core core{domain};
+  auto other = core.subscribe<Raw>("tool/raw");
+  const auto mismatch = prime(domain, {"play", file, "--remap", "tool/ticks:=tool/raw"});
+  EXPECT_EQ(mismatch.code, 1) << mismatch.out;
+  EXPECT_NE(mismatch.out.find("topic 'tool/raw' carries"), std::string::npos) << mismatch.out;
+  std::filesystem::remove(file);
+}
+
+
+// Played at its timing, each sample with the stamp it was recorded with;
+// at four times the speed, with stamps of when it is published.
+TEST(PrimeToolPlay, PublishesARecordingAtItsTimingWithItsStamps) {
+  const auto domain = unique_domain("tool-play");
+  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
+  {
+    PeerProcess ticks{{"ticks", domain, "tool/ticks", "500", "0"}};
+    ASSERT_TRUE(ticks.says("publishing"));
+    record_ticks(domain, file, 200);
+  }
+  const auto recorded = ticks_in(file);
+  ASSERT_EQ(recorded.size(), 200u);
+  const auto span = recorded.back().stamp - recorded.front().stamp;
+  shm::Core core{domain};
+  auto reader = core.subscribe<Tick>("tool/again", {}, kLossless).subscribe();
+
+  auto started = Clock::now();
+  auto play = PeerProcess::command(
+      {PRIME_TOOL_PATH, "--domain", domain, "play", file, "--remap", "tool/ticks:=tool/again", "--stamps", "keep"}, true);
+  auto read = ticks_read(reader, 200);
+  ASSERT_EQ(play.exit_code(30s), 0) << play.all_output();
+  EXPECT_GE(Clock::now() - started, span) << "at the recorded timing, never sooner";
+  ASSERT_EQ(read.size(), 200u);
+  for (std::size_t i = 0; i < read.size(); ++i) {
+    EXPECT_EQ(read[i].n, recorded[i].n);
+    EXPECT_EQ(read[i].stamp, recorded[i].stamp) << "--stamps keep: as recorded";
+  }
+
+  started = Clock::now();
+  auto faster = PeerProcess::command(
+      {PRIME_TOOL_PATH, "--domain", domain, "play", file, "--remap", "tool/ticks:=tool/again", "--rate", "4"}, true);
+  read = ticks_read(reader, 200);
+  ASSERT_EQ(faster.exit_code(30s), 0) << faster.all_output();
+  const auto ended = Clock::now();
+  EXPECT_GE(ended - started, span / 4);
+  ASSERT_EQ(read.size(), 200u);
+  for (std::size_t i = 0; i < read.size(); ++i) {
+    EXPECT_EQ(read[i].n, recorded[i].n);
+    EXPECT_GE(read[i].stamp, started) << "--stamps now (the default): when published";
+    EXPECT_LE(read[i].stamp, ended);
+  }
+  std::filesystem::remove(file);
+}
+
+// Two files are one timeline, whatever order they are given in; a seek
+// reads only the chunks from there on (a damaged chunk before it is
+// never read, and is named when it is).
+TEST(PrimeToolPlay, MergesFilesByTimeAndSeeksByTheIndex) {
+  const auto domain = unique_domain("tool-play-merge");
+  const auto dir = std::filesystem::temp_directory_path();
+  const auto first = dir / (domain + "-1.mcap"), second = dir / (domain + "-2.mcap"), damaged = dir / (domain + "-x.mcap");
+  {
+    PeerProcess ticks{{"ticks", domain, "tool/ticks", "500", "0"}};
+    ASSERT_TRUE(ticks.says("publishing"));
+    record_ticks(domain, first, 100, "512");
+    record_ticks(domain, second, 100, "512");
+  }
+  auto both = ticks_in(first);
+  const auto later = ticks_in(second);
+  ASSERT_LT(both.back().n, later.front().n);
+  both.insert(both.end(), later.begin(), later.end());
+  shm::Core core{domain};
+  auto reader = core.subscribe<Tick>("tool/merged", {}, kLossless).subscribe();
+  const auto merged = prime(domain, {"play", second, first, "--rate", "max", "--remap", "tool/ticks:=tool/merged"});
+  ASSERT_EQ(merged.code, 0) << merged.out;
+  EXPECT_NE(merged.out.find("played 200 samples"), std::string::npos) << merged.out;
+  const auto read = ticks_read(reader, 200);
+  ASSERT_EQ(read.size(), 200u);
+  for (std::size_t i = 0; i < read.size(); ++i) EXPECT_EQ(read[i].n, both[i].n) << i;
+
+  // The first chunk damaged: played from the start, it is named; from a
+  // time past it, it is never read.
+  std::filesystem::copy_file(first, damaged, std::filesystem::copy_options::overwrite_existing);
+  record::McapReader index{first};
+  const auto& chunks = index.summary().chunks;
+  ASSERT_GE(chunks.size(), 3u);
+  {
+    std::fstream f{damaged, std::ios::in | std::ios::out | std::ios::binary};
+    f.seekp(static_cast<std::streamoff>(chunks[0].offset + chunks[0].length - 4));
+    f.put('\x5a').put('\x5a');
+  }
+  const auto whole = prime(domain, {"play", damaged, "--rate", "max", "--remap", "tool/ticks:=tool/merged"});
+  EXPECT_EQ(whole.code, 1) << whole.out;
+  EXPECT_NE(whole.out.find("the chunk at offset " + std::to_string(chunks[0].offset)), std::string::npos) << whole.out;
+  while (reader.try_read()) {
+  }
+  const auto start = index.summary().statistics.message_start_time;
+  const auto from = (chunks[0].message_end_time + chunks[1].message_start_time) / 2;
+  char seconds[32];
+  std::snprintf(seconds, sizeof seconds, "%.9f", static_cast<double>(from - start) / 1e9);
+  const auto seek = prime(domain, {"play", damaged, "--start", seconds, "--rate", "max", "--remap", "tool/ticks:=tool/merged"});
+  ASSERT_EQ(seek.code, 0) << seek.out;
+  const auto recorded = ticks_in(first);
+  const auto skipped = static_cast<std::size_t>(std::ranges::count_if(recorded, [&](const Recorded& r) { return r.log_time < from; }));
+  ASSERT_GT(skipped, 0u);
+  const auto after = ticks_read(reader, recorded.size() - skipped);
+  ASSERT_EQ(after.size(), recorded.size() - skipped);
+  EXPECT_EQ(after.front().n, recorded[skipped].n);
+  EXPECT_EQ(after.back().n, recorded.back().n);
+  EXPECT_FALSE(reader.try_read()) << "nothing more";
+  for (const auto& f : {first, second, damaged}) std::filesystem::remove(f);
+}
+
+// Into a domain no one has set up: the player makes it, and the topic,
+// for the recorded type, so a reader of that type opens it; --loop plays
+// on until Ctrl-C, which ends it as asked (exit 0).
+TEST(PrimeToolPlay, MakesTheRecordedTopicForItsTypeAndLoopsUntilCtrlC) {
+  const auto recorded_in = unique_domain("tool-play-rec");
+  const auto file = std::filesystem::temp_directory_path() / (recorded_in + ".mcap");
+  {
+    PeerProcess ticks{{"ticks", recorded_in, "tool/ticks", "500", "0"}};
+    ASSERT_TRUE(ticks.says("publishing"));
+    record_ticks(recorded_in, file, 50);
+  }
+  const auto recorded = ticks_in(file);
+  const auto domain = unique_domain("tool-play-new");
+  ASSERT_FALSE(shm::access_of(domain));
+  auto play = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "play", file, "--loop", "--rate", "4"}, true);
+  ASSERT_TRUE(within(10s, [&] {
+    const auto s = shm::inspect(domain);
+    return s && std::ranges::any_of(s->topics, [](const auto& t) { return t.name == "tool/ticks"; });
+  }));
+  shm::Core core{domain};
+  auto reader = core.subscribe<Tick>("tool/ticks").subscribe();  // the type recorded: no mismatch
+  const auto read = ticks_read(reader, 3 * recorded.size());
+  ASSERT_EQ(read.size(), 3 * recorded.size());
+  std::size_t restarts = 0;
+  for (std::size_t i = 1; i < read.size(); ++i) {
+    if (read[i].n < read[i - 1].n) {
+      ++restarts;
+      EXPECT_EQ(read[i].n, recorded.front().n) << "again from the start";
+    }
+  }
+  EXPECT_GE(restarts, 2u);
+  ::kill(play.pid(), SIGINT);
+  EXPECT_EQ(play.exit_code(10s), 0);
+  EXPECT_NE(play.all_output().find("samples on 'tool/ticks'"), std::string::npos);
+  std::filesystem::remove(file);
+}
+
+}  // namespace
+}  // namespace prime::test
