@@ -64,6 +64,19 @@ std::vector<Recorded> ticks_read(Reader& reader, std::size_t n) {
   return out;
 }
 
+// `prime play <args...>` into `domain`, while `reader` reads the `n`
+// ticks it plays (a `block` topic's reader that stops reading is passed
+// over after the publisher's block timeout: it reads as they come).
+template <class Reader>
+std::pair<Run, std::vector<Recorded>> play_and_read(const std::string& domain, std::vector<std::string> args, Reader& reader,
+                                                    std::size_t n) {
+  args.insert(args.begin(), {PRIME_TOOL_PATH, "--domain", domain, "play"});
+  auto play = PeerProcess::command(std::move(args), true);
+  auto read = ticks_read(reader, n);
+  auto out = play.all_output();
+  return {Run{play.exit_code().value_or(-1), out}, std::move(read)};
+}
+
 // `n` ticks of a 500 Hz publisher recorded into `file` (chunks of `chunk` bytes).
 void record_ticks(const std::string& domain, const std::filesystem::path& file, std::size_t n, const std::string& chunk = "1048576") {
   const auto r = prime(domain, {"record", "tool/ticks", "-o", file, "-n", std::to_string(n), "--chunk-size", chunk});
@@ -157,9 +170,9 @@ TEST(PrimeToolRecord, ARecorderKilledMidFileLeavesAFileThatIsReadPlayedAndRecove
   // Played: every complete chunk's samples.
   shm::Core core{domain};
   auto played = core.subscribe<Tick>("tool/played", {}, kLossless).subscribe();
-  const auto play = prime(domain, {"play", file, "--rate", "max", "--remap", "tool/ticks:=tool/played"});
+  const auto [play, read] = play_and_read(domain, {file, "--rate", "max", "--remap", "tool/ticks:=tool/played"}, played, n);
   EXPECT_EQ(play.code, 0) << play.out;
-  EXPECT_EQ(ticks_read(played, n).size(), n);
+  EXPECT_EQ(read.size(), n);
 
   // Recovered: the same messages, now with an index and a summary.
   const auto recovered = std::filesystem::temp_directory_path() / (domain + "-recovered.mcap");
@@ -226,6 +239,48 @@ TEST(PrimeToolRecord, BadFilesAndOptionsAreRefusedByName) {
 }
 
 
+// Split by size: a series of files that, played as one timeline, hold
+// every sample recorded once, the losses counted in the file they fell in.
+TEST(PrimeToolRecord, SplitFilesHoldEverySampleOnceAndPlayAsOne) {
+  const auto domain = unique_domain("tool-record-split");
+  const auto stem = std::filesystem::temp_directory_path() / domain;
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "2000", "0"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  const auto recorded = prime(domain, {"record", "tool/ticks", "-o", stem.string() + ".mcap", "-n", "3000", "--chunk-size",
+                                       "1024", "--max-size", "8192", "--compression", "lz4"});
+  ASSERT_EQ(recorded.code, 0) << recorded.out;
+  std::vector<std::string> files;
+  for (int i = 0; std::filesystem::exists(stem.string() + "_" + std::to_string(i) + ".mcap"); ++i)
+    files.push_back(stem.string() + "_" + std::to_string(i) + ".mcap");
+  ASSERT_GE(files.size(), 4u) << recorded.out;
+  EXPECT_NE(recorded.out.find(std::to_string(files.size()) + " files"), std::string::npos) << recorded.out;
+  std::uint64_t gaps = 0, losses = 0;
+  std::vector<Recorded> all;
+  for (const auto& f : files) {
+    const auto in = ticks_in(f);
+    all.insert(all.end(), in.begin(), in.end());
+    record::McapReader reader{f};
+    for (const auto& m : reader.summary().metadata)
+      if (m.name == record::kLossesMetadata) losses += std::stoull(m.values.at("tool/ticks"));
+  }
+  ASSERT_EQ(all.size(), 3000u);
+  for (std::size_t i = 1; i < all.size(); ++i) {
+    ASSERT_GT(all[i].n, all[i - 1].n) << "once each, in order, across every split";
+    gaps += all[i].n - all[i - 1].n - 1;
+  }
+  EXPECT_EQ(losses, gaps);
+
+  shm::Core core{domain};
+  auto reader = core.subscribe<Tick>("tool/replayed", {}, kLossless).subscribe();
+  std::vector<std::string> args{"--rate", "max", "--remap", "tool/ticks:=tool/replayed"};
+  args.insert(args.end(), files.rbegin(), files.rend());
+  const auto [played, read] = play_and_read(domain, args, reader, all.size());
+  ASSERT_EQ(played.code, 0) << played.out;
+  ASSERT_EQ(read.size(), all.size());
+  for (std::size_t i = 0; i < read.size(); ++i) ASSERT_EQ(read[i].n, all[i].n) << i;
+  for (const auto& f : files) std::filesystem::remove(f);
+}
+
 // Played at its timing, each sample with the stamp it was recorded with;
 // at four times the speed, with stamps of when it is published.
 TEST(PrimeToolPlay, PublishesARecordingAtItsTimingWithItsStamps) {
@@ -289,10 +344,9 @@ TEST(PrimeToolPlay, MergesFilesByTimeAndSeeksByTheIndex) {
   both.insert(both.end(), later.begin(), later.end());
   shm::Core core{domain};
   auto reader = core.subscribe<Tick>("tool/merged", {}, kLossless).subscribe();
-  const auto merged = prime(domain, {"play", second, first, "--rate", "max", "--remap", "tool/ticks:=tool/merged"});
+  const auto [merged, read] = play_and_read(domain, {second, first, "--rate", "max", "--remap", "tool/ticks:=tool/merged"}, reader, 200);
   ASSERT_EQ(merged.code, 0) << merged.out;
   EXPECT_NE(merged.out.find("played 200 samples"), std::string::npos) << merged.out;
-  const auto read = ticks_read(reader, 200);
   ASSERT_EQ(read.size(), 200u);
   for (std::size_t i = 0; i < read.size(); ++i) EXPECT_EQ(read[i].n, both[i].n) << i;
 
@@ -316,12 +370,12 @@ TEST(PrimeToolPlay, MergesFilesByTimeAndSeeksByTheIndex) {
   const auto from = (chunks[0].message_end_time + chunks[1].message_start_time) / 2;
   char seconds[32];
   std::snprintf(seconds, sizeof seconds, "%.9f", static_cast<double>(from - start) / 1e9);
-  const auto seek = prime(domain, {"play", damaged, "--start", seconds, "--rate", "max", "--remap", "tool/ticks:=tool/merged"});
-  ASSERT_EQ(seek.code, 0) << seek.out;
   const auto recorded = ticks_in(first);
   const auto skipped = static_cast<std::size_t>(std::ranges::count_if(recorded, [&](const Recorded& r) { return r.log_time < from; }));
   ASSERT_GT(skipped, 0u);
-  const auto after = ticks_read(reader, recorded.size() - skipped);
+  const auto [seek, after] = play_and_read(domain, {damaged, "--start", seconds, "--rate", "max", "--remap", "tool/ticks:=tool/merged"},
+                                           reader, recorded.size() - skipped);
+  ASSERT_EQ(seek.code, 0) << seek.out;
   ASSERT_EQ(after.size(), recorded.size() - skipped);
   EXPECT_EQ(after.front().n, recorded[skipped].n);
   EXPECT_EQ(after.back().n, recorded.back().n);

@@ -166,6 +166,10 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"none", "lz4", "zstd"}));
   record->add_option("--chunk-size", rec.chunk_size, "bytes of messages a chunk collects (default 1 MiB)")
       ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 30));
+  record->add_option("--max-size", rec.max_size, "bytes a file reaches before the next is begun (FILE_0.mcap, FILE_1.mcap, ...)")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 50));
+  record->add_option("--max-duration", rec.max_duration, "seconds a file spans before the next is begun")
+      ->check(number_in(1e-3, kMaxSeconds, "from 0.001 to 31536000 seconds"));
   record->add_option("--duration", o.duration, "seconds to record (default: until Ctrl-C)")->check(number_in(0, kMaxSeconds, kSecondsText));
   record->add_option("-n,--count", o.count, "stop after this many samples");
   auto* info_of_recording = record->add_subcommand("info", "what a recording holds: topics, types, counts, rates, losses");
@@ -193,7 +197,8 @@ int main(int argc, char** argv) {
   play->add_option("--start", play_options.start, "seconds into the recordings to start at (found by their index)")->check(seconds);
   play->add_option("--duration", play_options.duration, "seconds of the recordings to play (default: to their end)")->check(seconds);
   play->add_option("--topics", play_options.topics, "only these recorded topics");
-  play->add_option("--remap", play_options.remaps, "recorded:=published, publish a topic under another name");
+  play->add_option("--remap", play_options.remaps, "recorded:=published, publish a topic under another name (repeatable)")
+      ->allow_extra_args(false);
   play->add_option("--stamps", play_options.stamps, "the samples' stamps: now (when published, the default) or keep (as recorded)")
       ->check(CLI::IsMember({"now", "keep"}));
   bench::Options b;

@@ -17,6 +17,7 @@
 #include "prime/record/mcap_reader.hpp"
 #include "prime/record/mcap_writer.hpp"
 #include "prime/record/prime_metadata.hpp"
+#include "prime/record/recorder.hpp"
 #include "prime/shm.hpp"
 #include "stats.hpp"
 #include "table.hpp"
@@ -39,8 +40,9 @@ rec::Compression compression_named(const std::string& name) {
 struct Recorded {
   std::string topic;
   Reader<shm::View<shm::Bytes>> reader;
-  std::uint16_t channel;
+  std::size_t index;  // the recorder's
   std::uint64_t written = 0;
+  std::uint64_t lost = 0;
 };
 
 }  // namespace
@@ -59,16 +61,18 @@ int shm_record(const Options& o, const RecordOptions& r) {
   }
   const auto snapshot = snapshot_of(o);
   shm::Core core{o.domain, joining(o, "prime record")};
-  rec::McapWriter file{r.out, {.compression = compression_named(r.compression), .chunk_size = r.chunk_size, .profile = ""}};
+  rec::Recorder file{r.out,
+                     {.file = {.compression = compression_named(r.compression), .chunk_size = r.chunk_size, .profile = ""},
+                      .max_size = r.max_size,
+                      .max_duration = static_cast<std::uint64_t>(r.max_duration * 1e9)}};
   // Stamps are steady_clock (one clock for every process of the machine):
   // written as Unix time, by one offset taken now and kept in the file.
   const auto steady_to_unix = std::chrono::duration_cast<std::chrono::nanoseconds>(
                                   std::chrono::system_clock::now().time_since_epoch() - Clock::now().time_since_epoch())
                                   .count();
-  file.add_metadata(rec::kClockMetadata, {{"steady_to_unix_ns", std::to_string(steady_to_unix)}});
+  file.add_metadata({rec::kClockMetadata, {{"steady_to_unix_ns", std::to_string(steady_to_unix)}}});
   std::vector<std::unique_ptr<Recorded>> recorded;
   std::set<std::string> known;
-  std::map<std::string, std::uint16_t> schemas;
   // Opens what is to be recorded and is not yet: every topic named must be
   // there at the start; with --all, topics that appear later join.
   auto open = [&](const shm::RegistrySnapshot& s, bool at_start) {
@@ -83,15 +87,13 @@ int shm_record(const Options& o, const RecordOptions& r) {
     for (const auto& t : s.topics) {
       if (known.contains(t.name) || !wanted(t.name)) continue;
       known.insert(t.name);
-      auto schema = schemas.find(t.type);
-      if (schema == schemas.end()) schema = schemas.emplace(t.type, file.add_schema(t.type, "prime", t.schema)).first;
       auto metadata = rec::fingerprint_metadata(t.fingerprint);
       metadata.insert({{"type", t.type},
                        {"capacity", std::to_string(t.qos.capacity)},
                        {"max_message_size", std::to_string(t.qos.max_message_size)},
                        {"overflow", t.qos.overflow == Overflow::block ? "block" : "drop_oldest"}});
-      const auto channel = file.add_channel(schema->second, t.name, "prime-raw", metadata);
-      recorded.push_back(std::make_unique<Recorded>(Recorded{t.name, core.observe(t.name), channel}));
+      const auto topic = file.add_topic({0, t.type, "prime", t.schema}, {0, 0, t.name, "prime-raw", metadata});
+      recorded.push_back(std::make_unique<Recorded>(Recorded{t.name, core.observe(t.name), topic}));
     }
   };
   open(snapshot, true);
@@ -106,19 +108,21 @@ int shm_record(const Options& o, const RecordOptions& r) {
   while (!ctrl_c_pressed() && Clock::now() < until && (o.count == 0 || total < o.count)) {
     bool any = false;
     for (auto& t : recorded) {
-      // Its one view at a time (the tools' slot holds one): written, then let go.
+      // Its one view at a time (the tools' slot holds one): copied into
+      // the writer's queue, then let go.
       for (int k = 0; k < 256 && (o.count == 0 || total < o.count); ++k) {
         auto sample = t->reader.try_read();
         if (!sample) break;
         const auto arrived = Clock::now();
-        const auto bytes = sample->value.bytes();
         const auto log_time = static_cast<std::uint64_t>(sample->stamp.time_since_epoch().count() + steady_to_unix);
         const auto publish_time = static_cast<std::uint64_t>(arrived.time_since_epoch().count() + steady_to_unix);
-        file.write(t->channel, static_cast<std::uint32_t>(sample->value.sequence()), log_time, publish_time, bytes);
+        file.write(t->index, static_cast<std::uint32_t>(sample->value.sequence()), log_time, publish_time,
+                   sample->value.bytes());
         ++t->written;
         ++total;
         any = true;
       }
+      if (const auto lost = t->reader.lost(); lost != t->lost) file.lost(t->index, t->lost = lost);
     }
     if (r.all && Clock::now() >= next_look) {
       open(core.registry(), false);
@@ -126,13 +130,12 @@ int shm_record(const Options& o, const RecordOptions& r) {
     }
     if (!any) std::this_thread::sleep_for(200us);
   }
-  std::map<std::string, std::string> losses;
-  for (const auto& t : recorded) losses[t->topic] = std::to_string(t->reader.lost());
-  file.add_metadata(rec::kLossesMetadata, losses);
   file.close();
   for (const auto& t : recorded)
-    std::cerr << "prime: recorded " << t->written << " samples of '" << t->topic << "', lost " << t->reader.lost() << '\n';
-  std::cerr << "prime: " << r.out << ": " << file.bytes_written() << " bytes\n";
+    std::cerr << "prime: recorded " << t->written << " samples of '" << t->topic << "', lost " << t->lost << '\n';
+  const auto files = file.files();
+  std::cerr << "prime: " << (files.size() == 1 ? files.front() : std::to_string(files.size()) + " files, " + files.front() + " to " + files.back())
+            << ": " << file.bytes_written() << " bytes\n";
   const bool open_ended = o.duration <= 0 && o.count == 0;
   return after_ctrl_c(open_ended, int{kOk});
 }

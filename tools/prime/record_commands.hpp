@@ -18,6 +18,8 @@ struct RecordOptions {
   std::string out;      // the file
   std::string compression = "zstd";
   std::size_t chunk_size = 1 << 20;
+  std::uint64_t max_size = 0;  // bytes a file reaches before the next is begun (0: one file)
+  double max_duration = 0;     // seconds a file spans before the next is begun (0: one file)
 };
 
 int shm_record(const Options& o, const RecordOptions& r);

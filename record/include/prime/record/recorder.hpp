@@ -1,0 +1,110 @@
+#pragma once
+
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <exception>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "prime/record/mcap.hpp"
+#include "prime/record/mcap_writer.hpp"
+
+namespace prime::record {
+
+struct RecorderOptions {
+  WriterOptions file;                 // each file's compression and chunk size
+  std::uint64_t max_size = 0;         // bytes a file reaches before the next is begun (0: one file)
+  std::uint64_t max_duration = 0;     // ns of log time a file spans before the next is begun (0: one file)
+  std::size_t max_queued = 256 << 20;  // bytes of messages queued for the writer before write() waits
+};
+
+// The writing side of a recording: messages queued by the reading side
+// (copied, so it can let go of what it read at once) and written on a
+// thread of its own, so compressing a chunk, the disk, or closing one
+// file and beginning the next never holds the reading up. Split by size
+// or by duration, the files are `<stem>_0.mcap`, `<stem>_1.mcap`, ...:
+// each complete on its own (every schema, channel and metadata, its own
+// summary) and, read in turn, holding every message once. A file ends at
+// the first chunk boundary past its limit.
+//
+// The writer's error (Errc::no_space on a full disk, say) is thrown by the
+// next write() or close(); what was written before it stays readable.
+// add_topic, add_metadata, lost, write and close: one thread.
+class Recorder {
+ public:
+  Recorder(std::string path, RecorderOptions options);
+  Recorder(const Recorder&) = delete;
+  Recorder& operator=(const Recorder&) = delete;
+  ~Recorder();  // close(), its error lost
+
+  // A topic, written as a schema and a channel into the file being written
+  // and every file after it; its index for write().
+  std::size_t add_topic(const Schema& schema, const Channel& channel);
+  // Metadata written into every file from the next on, and this one if
+  // nothing is written yet (the clock, say).
+  void add_metadata(const Metadata& metadata);
+  // How many samples of `topic` were lost before the reading side read
+  // them, so far: each file's metadata `prime.losses` counts those lost
+  // between its first message and its last.
+  void lost(std::size_t topic, std::uint64_t so_far);
+  // Queues a message; waits while `max_queued` bytes are queued.
+  void write(std::size_t topic, std::uint32_t sequence, std::uint64_t log_time, std::uint64_t publish_time,
+             std::span<const std::byte> data);
+  // Writes what is queued and closes the last file. Once.
+  void close();
+
+  // The files begun so far, in order.
+  [[nodiscard]] std::vector<std::string> files() const;
+  // Bytes in the files closed so far; messages written; the most bytes
+  // ever queued at once.
+  [[nodiscard]] std::uint64_t bytes_written() const;
+  [[nodiscard]] std::uint64_t messages_written() const;
+  [[nodiscard]] std::size_t most_queued() const;
+
+ private:
+  struct Item {
+    bool is_loss;  // a loss count (`lost`), not a message
+    std::size_t topic;
+    std::uint64_t lost;
+    std::uint32_t sequence;
+    std::uint64_t log_time, publish_time;
+    std::vector<std::byte> data;
+  };
+  void push(Item item);
+  void run();
+  void begin_file();
+  void catch_up();  // the topics and metadata added since the file was begun, into it
+  void end_file();
+
+  const std::string path_;
+  const RecorderOptions options_;
+  // Shared with the writer thread, under mutex_.
+  mutable std::mutex mutex_;
+  std::condition_variable changed_;
+  std::deque<Item> queue_;
+  std::size_t queued_ = 0, most_queued_ = 0;
+  bool closing_ = false;
+  std::exception_ptr error_;
+  std::vector<std::string> files_;
+  std::uint64_t bytes_done_ = 0, messages_ = 0;
+  std::vector<std::pair<Schema, Channel>> topics_;
+  std::vector<Metadata> metadata_;
+  // The writer thread's own (and the constructor's, before it starts).
+  std::unique_ptr<McapWriter> file_;
+  std::map<std::string, std::uint16_t> schema_ids_;  // by type name, in this file
+  std::vector<std::uint16_t> channel_ids_;           // by topic, in this file
+  std::size_t metadata_written_ = 0;                 // of metadata_, into this file
+  std::uint64_t file_first_log_ = 0, file_messages_ = 0;
+  std::vector<std::uint64_t> lost_, lost_at_start_;
+  std::thread writer_;
+  bool closed_ = false;
+};
+
+}  // namespace prime::record
