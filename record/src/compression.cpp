@@ -79,4 +79,8 @@ std::uint32_t crc32(std::span<const std::byte> bytes, std::uint32_t crc) noexcep
   return static_cast<std::uint32_t>(c);
 }
 
+std::uint32_t crc32_combine(std::uint32_t a, std::uint32_t b, std::uint64_t b_length) noexcept {
+  return static_cast<std::uint32_t>(::crc32_combine64(a, b, static_cast<z_off64_t>(b_length)));
+}
+
 }  // namespace prime::record::detail

@@ -17,5 +17,7 @@ Bytes compress(Compression c, std::span<const std::byte> in);
 Bytes decompress(const std::string& name, std::span<const std::byte> in, std::uint64_t size, const std::string& where);
 
 std::uint32_t crc32(std::span<const std::byte> bytes, std::uint32_t crc = 0) noexcept;
+// The CRC-32 of A then B, from A's, B's and B's length.
+std::uint32_t crc32_combine(std::uint32_t a, std::uint32_t b, std::uint64_t b_length) noexcept;
 
 }  // namespace prime::record::detail

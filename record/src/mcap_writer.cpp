@@ -89,20 +89,33 @@ struct McapWriter::State {
     append(out);
   }
 
+  // The chunk record is written as its head and its payload (the records,
+  // or them compressed): no copy of the payload is made to frame it, and
+  // with no compression its CRC in the data section's is combined from
+  // the chunk's own rather than computed over it again.
   void flush_chunk() {
     if (records.empty()) return;
-    const auto compressed = compress(options.compression, records);
-    Bytes body;
-    put<std::uint64_t>(body, chunk_start);
-    put<std::uint64_t>(body, chunk_end);
-    put<std::uint64_t>(body, records.size());
-    put<std::uint32_t>(body, crc32(records));
-    put_string(body, compression_name(options.compression));
-    put<std::uint64_t>(body, compressed.size());
-    put_bytes(body, compressed);
-    ChunkInfo info{chunk_start, chunk_end, offset, 1 + 8 + body.size(), {}, 0, compression_name(options.compression),
-                   compressed.size(), records.size()};
-    data_record(kChunk, body);
+    const auto records_crc = crc32(records);
+    Bytes compressed;
+    if (options.compression != Compression::none) compressed = compress(options.compression, records);
+    const std::span<const std::byte> payload = options.compression == Compression::none ? std::span{records} : std::span{compressed};
+    const std::string_view name = compression_name(options.compression);
+    Bytes head;
+    head.push_back(std::byte{kChunk});
+    put<std::uint64_t>(head, 8 + 8 + 8 + 4 + 4 + name.size() + 8 + payload.size());
+    put<std::uint64_t>(head, chunk_start);
+    put<std::uint64_t>(head, chunk_end);
+    put<std::uint64_t>(head, records.size());
+    put<std::uint32_t>(head, records_crc);
+    put_string(head, name);
+    put<std::uint64_t>(head, payload.size());
+    ChunkInfo info{chunk_start, chunk_end, offset, head.size() + payload.size(), {}, 0, std::string{name},
+                   payload.size(), records.size()};
+    data_crc = crc32(head, data_crc);
+    data_crc = options.compression == Compression::none ? crc32_combine(data_crc, records_crc, records.size())
+                                                         : crc32(payload, data_crc);
+    append(head);
+    append(payload);
     const auto indexes_start = offset;
     for (const auto& [channel, entries] : index) {
       Bytes mi;

@@ -154,7 +154,9 @@ TEST(Recorder, ATopicAddedLaterIsInEveryFileFromItsFirstMessageOn) {
   for (const auto& f : files) {
     rec::McapReader reader{f};
     reader.for_each_message([&](const rec::Message& m) { seen = seen || reader.summary().channels.at(m.channel_id).topic == "b"; });
-    if (seen) EXPECT_EQ(reader.summary().channels.size(), 2u) << f;
+    if (seen) {
+      EXPECT_EQ(reader.summary().channels.size(), 2u) << f;
+    }
   }
   EXPECT_TRUE(seen);
   const auto all = read_all(files);

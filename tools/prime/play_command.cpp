@@ -157,11 +157,15 @@ int shm_play(const Options& o, const PlayOptions& p) {
   finish_on_ctrl_c();
   ::prctl(PR_SET_TIMERSLACK, 1UL);  // wake-ups when asked, not up to 50 µs later
   auto wanted = [&](std::size_t f, std::uint16_t channel) { return route[f].contains(channel); };
-  auto pass_start = Clock::now();
-  const auto started = pass_start;
+  const auto started = Clock::now();
+  auto pass_start = started;
   do {
     files.seek(from, to, wanted);
-    while (auto m = files.next()) {
+    auto m = files.next();
+    // Timed from the first sample in hand (its chunk read), or later if
+    // the pass before ran late.
+    pass_start = std::max(pass_start, Clock::now());
+    for (; m; m = files.next()) {
       auto& t = *route[m->file].at(m->message.channel_id);
       const auto& data = m->message.data;
       if (t.size && data.size() != *t.size)
@@ -177,8 +181,7 @@ int shm_play(const Options& o, const PlayOptions& p) {
       if (auto sent = t.publisher.publish(data, stamp); !sent) throw Failure{sent.error()};
       ++t.sent;
     }
-    pass_start += std::chrono::duration_cast<Clock::duration>(std::chrono::nanoseconds{span} / std::max(rate, 1e-9));
-    if (rate == 0) pass_start = Clock::now();
+    if (rate > 0) pass_start += std::chrono::duration_cast<Clock::duration>(std::chrono::nanoseconds{span} / rate);
   } while (p.loop && !ctrl_c_pressed());
 
   const auto took = std::chrono::duration<double>(Clock::now() - started).count();

@@ -41,6 +41,7 @@ struct Recorded {
   std::string topic;
   Reader<shm::View<shm::Bytes>> reader;
   std::size_t index;  // the recorder's
+  std::size_t capacity;
   std::uint64_t written = 0;
   std::uint64_t lost = 0;
 };
@@ -93,7 +94,7 @@ int shm_record(const Options& o, const RecordOptions& r) {
                        {"max_message_size", std::to_string(t.qos.max_message_size)},
                        {"overflow", t.qos.overflow == Overflow::block ? "block" : "drop_oldest"}});
       const auto topic = file.add_topic({0, t.type, "prime", t.schema}, {0, 0, t.name, "prime-raw", metadata});
-      recorded.push_back(std::make_unique<Recorded>(Recorded{t.name, core.observe(t.name), topic}));
+      recorded.push_back(std::make_unique<Recorded>(Recorded{t.name, core.observe(t.name), topic, t.qos.capacity}));
     }
   };
   open(snapshot, true);
@@ -105,31 +106,40 @@ int shm_record(const Options& o, const RecordOptions& r) {
                                     : Clock::time_point::max();
   std::uint64_t total = 0;
   auto next_look = start + 1s;
+  // What `t` has published and is not yet read, up to `most` samples: its
+  // one view at a time (the tools' slot holds one), copied into the
+  // writer's queue, then let go. Whether there was any.
+  auto read_some = [&](Recorded& t, std::size_t most) {
+    bool any = false;
+    for (std::size_t k = 0; k < most && (o.count == 0 || total < o.count); ++k) {
+      auto sample = t.reader.try_read();
+      if (!sample) break;
+      const auto arrived = Clock::now();
+      const auto log_time = static_cast<std::uint64_t>(sample->stamp.time_since_epoch().count() + steady_to_unix);
+      const auto publish_time = static_cast<std::uint64_t>(arrived.time_since_epoch().count() + steady_to_unix);
+      file.write(t.index, static_cast<std::uint32_t>(sample->value.sequence()), log_time, publish_time, sample->value.bytes());
+      ++t.written;
+      ++total;
+      any = true;
+    }
+    if (const auto lost = t.reader.lost(); lost != t.lost) file.lost(t.index, t.lost = lost);
+    return any;
+  };
   while (!ctrl_c_pressed() && Clock::now() < until && (o.count == 0 || total < o.count)) {
     bool any = false;
-    for (auto& t : recorded) {
-      // Its one view at a time (the tools' slot holds one): copied into
-      // the writer's queue, then let go.
-      for (int k = 0; k < 256 && (o.count == 0 || total < o.count); ++k) {
-        auto sample = t->reader.try_read();
-        if (!sample) break;
-        const auto arrived = Clock::now();
-        const auto log_time = static_cast<std::uint64_t>(sample->stamp.time_since_epoch().count() + steady_to_unix);
-        const auto publish_time = static_cast<std::uint64_t>(arrived.time_since_epoch().count() + steady_to_unix);
-        file.write(t->index, static_cast<std::uint32_t>(sample->value.sequence()), log_time, publish_time,
-                   sample->value.bytes());
-        ++t->written;
-        ++total;
-        any = true;
-      }
-      if (const auto lost = t->reader.lost(); lost != t->lost) file.lost(t->index, t->lost = lost);
-    }
+    for (auto& t : recorded) any = read_some(*t, 256) || any;
     if (r.all && Clock::now() >= next_look) {
       open(core.registry(), false);
       next_look = Clock::now() + 1s;
     }
-    if (!any) std::this_thread::sleep_for(200us);
+    if (!any) {
+      file.flush();
+      std::this_thread::sleep_for(100us);
+    }
   }
+  // Stopped: what was published by now is recorded too (a ring's worth at
+  // most, so a publisher flat out does not keep it going).
+  for (auto& t : recorded) read_some(*t, t->capacity);
   file.close();
   for (const auto& t : recorded)
     std::cerr << "prime: recorded " << t->written << " samples of '" << t->topic << "', lost " << t->lost << '\n';

@@ -3,7 +3,6 @@
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
-#include <deque>
 #include <exception>
 #include <map>
 #include <memory>
@@ -36,7 +35,7 @@ struct RecorderOptions {
 //
 // The writer's error (Errc::no_space on a full disk, say) is thrown by the
 // next write() or close(); what was written before it stays readable.
-// add_topic, add_metadata, lost, write and close: one thread.
+// add_topic, add_metadata, lost, write, flush and close: one thread.
 class Recorder {
  public:
   Recorder(std::string path, RecorderOptions options);
@@ -54,9 +53,13 @@ class Recorder {
   // them, so far: each file's metadata `prime.losses` counts those lost
   // between its first message and its last.
   void lost(std::size_t topic, std::uint64_t so_far);
-  // Queues a message; waits while `max_queued` bytes are queued.
+  // Queues a message (collected here, handed to the writer a batch at a
+  // time); waits while `max_queued` bytes are queued.
   void write(std::size_t topic, std::uint32_t sequence, std::uint64_t log_time, std::uint64_t publish_time,
              std::span<const std::byte> data);
+  // Hands what is collected to the writer now: for the reading side to
+  // call when it has nothing more to read for a while.
+  void flush();
   // Writes what is queued and closes the last file. Once.
   void close();
 
@@ -79,16 +82,20 @@ class Recorder {
   };
   void push(Item item);
   void run();
+  bool write_item(Item& item);  // false: not a message
   void begin_file();
   void catch_up();  // the topics and metadata added since the file was begun, into it
   void end_file();
 
   const std::string path_;
   const RecorderOptions options_;
+  // The reading side's batch, not yet handed over.
+  std::vector<Item> batch_;
+  std::size_t batch_bytes_ = 0;
   // Shared with the writer thread, under mutex_.
   mutable std::mutex mutex_;
   std::condition_variable changed_;
-  std::deque<Item> queue_;
+  std::vector<Item> queue_;
   std::size_t queued_ = 0, most_queued_ = 0;
   bool closing_ = false;
   std::exception_ptr error_;
