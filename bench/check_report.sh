@@ -18,7 +18,8 @@ for row in "Floor,latency,64,p50," "Shm,latency,64,p50," "Shm,latency,64,p99.9,"
            "Shm,throughput,64,rate," "SpscFloor256,throughput,64,rate," "ShmService,round-trip,64,p50," "FutexWake,latency-sleeping,64,p50," \
            "For,table1-1lane,100,per hop," "Liberty,table1-1lane,100,per hop," \
            "Shm,fanout-throughput-1,64,rate," "Shm,fanout-publish-4,64,publish," \
-           "ShmBatch,publisher-alone,64,rate,"; do
+           "ShmBatch,publisher-alone,64,rate," "ShmRecorder,record-flat,64,rate," "ShmRecorder,record-paced-100000-64,64,lost," \
+           "ShmPlay,play-timing,0,p99,"; do
   grep -q "^$row" "$csv" || fail "figures.csv lacks $row"
 done
 if command -v redis-server >/dev/null; then

@@ -7,6 +7,7 @@
 #include <limits>
 #include <optional>
 #include <sstream>
+#include <tuple>
 #include <utility>
 
 namespace prime::tool::bench {
@@ -306,6 +307,59 @@ std::string optimus_table(const Results& r) {
 
 // The paper's two tests: availability per request period and extra
 // clients, and response times with their outliers, per payload.
+// prime record and prime play (the record suite), against the MCAP
+// project's published figures for its own writer.
+std::string recording_table(const Results& r) {
+  const auto kib = std::int64_t{64}, mib = std::int64_t{1} << 20;
+  if (!r.find("ShmRecorder", "record-flat", kib, "rate") && !r.find("ShmPlay", "play-timing", 0, "p99")) return "No figures.\n";
+  std::ostringstream out;
+  auto figure = [&](const std::string& who, const std::string& scenario, std::int64_t payload, const std::string& statistic) {
+    return r.find(who, scenario, payload, statistic);
+  };
+  auto count = [](std::optional<double> v) { return v ? number(*v, "%.0f") : std::string{"–"}; };
+  out << "| what | figure |\n|---|---|\n";
+  for (const auto payload : {kib, mib}) {
+    const auto rate = figure("ShmRecorder", "record-flat", payload, "rate");
+    const auto bytes = figure("ShmRecorder", "record-flat", payload, "bytes");
+    const auto with = figure("Shm", "publish-flat-recorded", payload, "rate");
+    const auto alone = figure("Shm", "publish-flat-alone", payload, "rate");
+    out << "| recording " << size_text(payload) << " samples, a publisher flat out on another core | "
+        << (rate ? rate_text(*rate) : "–") << " ("
+        << (!bytes ? std::string{"–"} : *bytes >= 1e9 ? number(*bytes / 1e9) + " GB/s" : number(*bytes / 1e6) + " MB/s")
+        << "); the publisher " << (with ? rate_text(*with) : "–") << ", " << ratio_text(divide(with, alone))
+        << " its rate alone |\n";
+  }
+  for (const auto& [payload, paced, what] :
+       {std::tuple{kib, std::string{"100000-64"}, "64 B at 100 kHz, a ring 64 deep"},
+        std::tuple{kib, std::string{"100000-1024"}, "64 B at 100 kHz, a ring 1024 deep"},
+        std::tuple{mib, std::string{"1000-64"}, "1 MiB at 1 kHz (1 GB/s), a ring 64 deep"}}) {
+    const auto scenario = "record-paced-" + paced;
+    const auto with = figure("Shm", "publish-paced-recorded-" + paced, payload, "publish");
+    const auto alone = figure("Shm", "publish-paced-alone-" + paced, payload, "publish");
+    out << "| recording " << what << " | " << count(figure("ShmRecorder", scenario, payload, "recorded")) << " recorded, "
+        << count(figure("ShmRecorder", scenario, payload, "lost")) << " lost, "
+        << count(figure("ShmRecorder", scenario, payload, "missing")) << " unaccounted; a publish "
+        << (with ? time_text(*with) : "–");
+    if (alone) out << " (" << time_text(*alone) << " with no recorder: " << ratio_text(divide(alone, with)) << ")";
+    out << " |\n";
+  }
+  const auto p50 = figure("ShmPlay", "play-timing", 0, "p50"), p99 = figure("ShmPlay", "play-timing", 0, "p99"),
+             worst = figure("ShmPlay", "play-timing", 0, "max");
+  out << "| prime play at ×1, 1 kHz for 2 s: each sample's arrival against its recorded offset | p50 "
+      << (p50 ? time_text(*p50) : "–") << ", p99 " << (p99 ? time_text(*p99) : "–") << ", max "
+      << (worst ? time_text(*worst) : "–") << " |\n";
+  // The MCAP project's published benchmark of its own writer, chunked and
+  // indexed to a ramdisk, on another machine: about 2.2 GB/s at 1 MiB and
+  // 0.4 M msgs/s at 100 B.
+  const auto big = figure("ShmRecorder", "record-flat", mib, "bytes");
+  const auto small = figure("ShmRecorder", "record-flat", kib, "rate");
+  out << "\nThe MCAP project publishes about 2.2 GB/s at 1 MiB and 0.4 M msgs/s at 100 B for its own writer, chunked "
+         "and indexed into a ramdisk on another machine, with no reader of shared memory in front of it: this "
+         "recorder, reading each sample out of a live topic and writing it into tmpfs, came to "
+      << ratio_text(divide(big, 2.2e9)) << " the first and " << ratio_text(divide(small, 0.4e6)) << " the second.\n";
+  return out.str();
+}
+
 std::string availability_tables(const Results& r) {
   std::vector<std::string> availability, response;
   for (const auto& f : r.figures) {
@@ -644,6 +698,14 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
   image("optimus", "Optimus against hiredis");
   md << optimus_table(results) << '\n';
   md << "## Services under load (after the communication-architecture paper)\n\n" << availability_tables(results) << '\n';
+  md << "## Recording and replay\n\n"
+     << "`prime record` (its own process: a reading thread, a writing thread below it) on the CPUs the publisher "
+        "does not use, the publisher pinned to the first, into an uncompressed file on tmpfs (/dev/shm). Flat out, "
+        "the publisher publishes as fast as it can and the recorder takes what it can read; paced, it publishes "
+        "each sample at its time, and every sample from the first the recorder read on is recorded, counted lost "
+        "(overwritten in the ring before it was read) or unaccounted (none, or the accounting is wrong). `prime "
+        "play` plays a recording of 2 s at 1 kHz into a topic read by a busy reader.\n\n"
+     << recording_table(results) << '\n';
   if (!results.notes.empty()) {
     md << "## Notes\n\n";
     for (const auto& note : results.notes) md << "- " << note << '\n';

@@ -196,6 +196,39 @@ void read_loop(const Json& run, Results& out) {
   }
 }
 
+// prime_record_bench: BM_RecordFlat/<bytes>, BM_PublisherAlone/<bytes>,
+// BM_RecordPaced/<bytes>/<hz>/<capacity>, BM_PublishPacedAlone/<bytes>/<hz>/<capacity>,
+// BM_PlayTiming (record_bench.cpp says what each counts).
+void read_record(const Json& run, Results& out) {
+  const auto parts = name_parts(run);
+  const auto& kind = parts[0];
+  const auto payload = parts.size() > 1 ? integer(parts[1]) : 0;
+  auto add = [&](const std::string& who, const std::string& scenario, const char* counter, const std::string& statistic,
+                 const std::string& unit) {
+    if (const double* v = number(run, counter)) out.figures.push_back({who, scenario, payload, statistic, *v, unit});
+  };
+  const auto paced = parts.size() > 3 ? parts[2] + "-" + parts[3] : std::string{};
+  if (kind == "RecordFlat") {
+    add("ShmRecorder", "record-flat", "recorded_per_s", "rate", "msgs/s");
+    add("ShmRecorder", "record-flat", "recorded_bytes_per_s", "bytes", "B/s");
+    add("ShmRecorder", "record-flat", "lost", "lost", "msgs");
+    add("Shm", "publish-flat-recorded", "published_per_s", "rate", "msgs/s");
+  } else if (kind == "PublisherAlone") {
+    add("Shm", "publish-flat-alone", "published_per_s", "rate", "msgs/s");
+  } else if (kind == "RecordPaced") {
+    add("ShmRecorder", "record-paced-" + paced, "recorded", "recorded", "msgs");
+    add("ShmRecorder", "record-paced-" + paced, "lost", "lost", "msgs");
+    add("ShmRecorder", "record-paced-" + paced, "missing", "missing", "msgs");
+    add("Shm", "publish-paced-recorded-" + paced, "publish_ns", "publish", "ns");
+  } else if (kind == "PublishPacedAlone") {
+    add("Shm", "publish-paced-alone-" + paced, "publish_ns", "publish", "ns");
+  } else if (kind == "PlayTiming") {
+    add("ShmPlay", "play-timing", "timing_error_p50_ns", "p50", "ns");
+    add("ShmPlay", "play-timing", "timing_error_p99_ns", "p99", "ns");
+    add("ShmPlay", "play-timing", "timing_error_max_ns", "max", "ns");
+  }
+}
+
 }  // namespace
 
 const double* number(const Json& object, const std::string& key) {
@@ -259,6 +292,16 @@ std::vector<Suite> suites() {
        .needs = {"cyclictest", "stress-ng"},
        .quick_env = {{"PRIME_LOOP_SECONDS", "0.5"}},
        .read = read_loop},
+      // Each runs once, for a fixed time (2 s, 0.3 s quick; the play, 2 s).
+      {.name = "record",
+       .title = "prime record beside a publisher flat out and paced, and prime play's timing",
+       .binary = "record/prime_record_bench",
+       .quick_filter = ".",
+       .quick_min_time = 0.01,
+       .full_min_time = 0.01,
+       .full_repetitions = 3,
+       .quick_env = {{"PRIME_RECORD_SECONDS", "0.3"}},
+       .read = read_record},
   };
 }
 
