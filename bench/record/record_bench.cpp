@@ -12,6 +12,8 @@
 //   BM_PublishPacedAlone/64/100000/64
 //                                  the paced publisher with no recorder: publish_ns
 //                                  (BM_RecordPaced's beside it: what the recorder costs it)
+//   BM_WriteFloor                  write() of 1 MiB blocks into the same folder on the
+//                                  recorder's CPUs: written_bytes_per_s, its floor
 //   BM_PlayTiming                  prime play of 2 s at 1 kHz, read by a busy
 //                                  reader: timing_error_<p50|p99|max>_ns, each
 //                                  sample's arrival against its recorded offset
@@ -19,6 +21,7 @@
 // Seconds per measurement: PRIME_RECORD_SECONDS (2 by default). The tool:
 // PRIME_TOOL (prime bench sets it to itself), else the build tree's.
 #include <benchmark/benchmark.h>
+#include <fcntl.h>
 #include <signal.h>
 #include <sys/statvfs.h>
 #include <unistd.h>
@@ -327,6 +330,34 @@ void BM_PlayTiming(benchmark::State& state) {
   }
 }
 
+// The floor a recorder of 1 MiB samples cannot beat: write() of 1 MiB
+// blocks into a new file in the same folder, on the recorder's CPUs, for
+// the run's seconds (what `dd bs=1M` does): bytes per second.
+void BM_WriteFloor(benchmark::State& state) {
+  TmpfsFile file{"floor"};
+  std::vector<std::byte> block(1 << 20, std::byte{0x5a});
+  for (auto _ : state) {
+    const auto set = cpus(false);
+    ::sched_setaffinity(0, sizeof set, &set);
+    const int fd = ::open(file.path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    if (fd < 0) throw std::runtime_error{"cannot make " + file.path};
+    const auto until = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds_per_run()));
+    const auto start = Clock::now();
+    std::uint64_t written = 0;
+    while (Clock::now() < until) {
+      const auto n = ::write(fd, block.data(), block.size());
+      if (n <= 0) break;
+      written += static_cast<std::uint64_t>(n);
+    }
+    const auto took = std::chrono::duration<double>(Clock::now() - start).count();
+    ::close(fd);
+    std::filesystem::remove(file.path);
+    unpin_this_thread();
+    state.counters["written_bytes_per_s"] = static_cast<double>(written) / took;
+  }
+}
+
+BENCHMARK(BM_WriteFloor)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_RecordFlat<64>)->Name("BM_RecordFlat/64")->Iterations(1)->UseRealTime();
 BENCHMARK(BM_RecordFlat<1 << 20>)->Name("BM_RecordFlat/1048576")->Iterations(1)->UseRealTime();
 BENCHMARK(BM_PublisherAlone<64>)->Name("BM_PublisherAlone/64")->Iterations(1)->UseRealTime();

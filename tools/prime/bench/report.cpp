@@ -326,6 +326,9 @@ std::string recording_table(const Results& r) {
     out << "| recording " << size_text(payload) << " samples, a publisher flat out on another core | "
         << (rate ? rate_text(*rate) : "–") << " ("
         << (!bytes ? std::string{"–"} : *bytes >= 1e9 ? number(*bytes / 1e9) + " GB/s" : number(*bytes / 1e6) + " MB/s")
+        << (payload == mib ? ", " + ratio_text(divide(bytes, figure("FileWrite", "record-flat", mib, "bytes"))) +
+                                 " of write() into the same folder alone"
+                           : std::string{})
         << "); the publisher " << (with ? rate_text(*with) : "–") << ", " << ratio_text(divide(with, alone))
         << " its rate alone |\n";
   }
@@ -704,7 +707,9 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
         "the publisher publishes as fast as it can and the recorder takes what it can read; paced, it publishes "
         "each sample at its time, and every sample from the first the recorder read on is recorded, counted lost "
         "(overwritten in the ring before it was read) or unaccounted (none, or the accounting is wrong). `prime "
-        "play` plays a recording of 2 s at 1 kHz into a topic read by a busy reader.\n\n"
+        "play` plays a recording of 2 s at 1 kHz into a topic read by a busy reader. The floor for 1 MiB samples is "
+        "write() of 1 MiB blocks into the same folder from the recorder's CPUs, nothing else done (what `dd bs=1M` "
+        "does).\n\n"
      << recording_table(results) << '\n';
   if (!results.notes.empty()) {
     md << "## Notes\n\n";

@@ -89,9 +89,11 @@ inline std::optional<Range> range_over(const std::vector<Results>& rounds, const
 // The SPSC rings (SpscFloor, and those that carry a header with each
 // payload: SpscInline, SpscRecords, SpscRecordsHeaders, SpscShmLayout) are
 // floors: what the hardware moves for their layout, nothing else done; so is
-// cyclictest, the least a periodic loop's wake-up can be late.
+// cyclictest, the least a periodic loop's wake-up can be late; and
+// FileWrite, write() of 1 MiB blocks into a file, what a recorder writes
+// at most.
 inline bool is_floor(const std::string& who) {
-  return who == "Floor" || who == "FutexWake" || who.starts_with("Spsc") || who == "Cyclictest";
+  return who == "Floor" || who == "FutexWake" || who.starts_with("Spsc") || who == "Cyclictest" || who == "FileWrite";
 }
 inline bool is_prime(const std::string& who) {
   return who.starts_with("Shm") || who == "Optimus" || who == "Radiant" || who == "Liberty" || who.starts_with("Sources");

@@ -196,7 +196,7 @@ void read_loop(const Json& run, Results& out) {
   }
 }
 
-// prime_record_bench: BM_RecordFlat/<bytes>, BM_PublisherAlone/<bytes>,
+// prime_record_bench: BM_WriteFloor, BM_RecordFlat/<bytes>, BM_PublisherAlone/<bytes>,
 // BM_RecordPaced/<bytes>/<hz>/<capacity>, BM_PublishPacedAlone/<bytes>/<hz>/<capacity>,
 // BM_PlayTiming (record_bench.cpp says what each counts).
 void read_record(const Json& run, Results& out) {
@@ -208,7 +208,9 @@ void read_record(const Json& run, Results& out) {
     if (const double* v = number(run, counter)) out.figures.push_back({who, scenario, payload, statistic, *v, unit});
   };
   const auto paced = parts.size() > 3 ? parts[2] + "-" + parts[3] : std::string{};
-  if (kind == "RecordFlat") {
+  if (kind == "WriteFloor") {
+    if (const double* v = number(run, "written_bytes_per_s")) out.figures.push_back({"FileWrite", "record-flat", 1 << 20, "bytes", *v, "B/s"});
+  } else if (kind == "RecordFlat") {
     add("ShmRecorder", "record-flat", "recorded_per_s", "rate", "msgs/s");
     add("ShmRecorder", "record-flat", "recorded_bytes_per_s", "bytes", "B/s");
     add("ShmRecorder", "record-flat", "lost", "lost", "msgs");
