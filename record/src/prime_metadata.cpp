@@ -55,10 +55,26 @@ std::optional<Fingerprint> recorded_fingerprint(const Summary& summary, const Ch
   f.alignment = *alignment;
   f.layout_version = *layout;
   f.hash = *hash;
-  const auto schema = summary.schemas.find(channel.schema_id);
-  if (schema == summary.schemas.end() || schema->second.name != f.describe())
-    throw damaged("its type's fingerprint (" + f.describe() + ") is not the type its schema names");
+  if (recorded_type(summary, channel) != f.describe())
+    throw damaged("its type's fingerprint (" + f.describe() + ") is not the type it names (" + recorded_type(summary, channel) + ")");
   return f;
+}
+
+std::string recorded_type(const Summary& summary, const Channel& channel) {
+  if (const auto it = channel.metadata.find(kTypeEntry); it != channel.metadata.end()) return it->second;
+  const auto schema = summary.schemas.find(channel.schema_id);
+  return schema == summary.schemas.end() ? std::string{"bytes of no type"} : schema->second.name;
+}
+
+std::optional<CdrCodec> recorded_codec(const Channel& channel, std::size_t size, const std::string& file) {
+  if (channel.message_encoding != "cdr") return std::nullopt;
+  const auto it = channel.metadata.find(kDescriptionEntry);
+  auto codec = it == channel.metadata.end() ? std::nullopt : CdrCodec::of(it->second, size);
+  if (!codec)
+    throw Failure{{Errc::damaged, "recording '" + file + "': topic '" + channel.topic +
+                                      "' is in CDR without a description of its type that fits its " + std::to_string(size) +
+                                      " bytes"}};
+  return codec;
 }
 
 std::int64_t steady_to_unix_ns(const Summary& summary, const std::string& file) {

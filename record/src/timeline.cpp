@@ -21,19 +21,20 @@ std::size_t Timeline::add(const std::string& topic, const std::string& type, std
   const auto& s = reader_->summary();
   const auto channel = std::ranges::find(s.channels, topic, [](const auto& c) { return c.second.topic; });
   if (channel == s.channels.end()) throw Failure{{Errc::not_found, "recording '" + path_ + "' has no topic '" + topic + "'"}};
-  const auto schema = s.schemas.find(channel->second.schema_id);
-  const auto recorded = schema == s.schemas.end() ? std::string{"bytes of no type"} : schema->second.name;
+  const auto recorded = recorded_type(s, channel->second);
   if (recorded != type)
     throw Failure{{Errc::type_mismatch, "recording '" + path_ + "': topic '" + topic + "' was recorded as " + recorded +
                                             ", not " + type}};
   Topic t{topic, {}, {}, {}};
   const auto id = channel->first;
+  const auto codec = recorded_codec(channel->second, size, path_);
+  const auto what = "recording '" + path_ + "': a sample of '" + topic + "'";
   reader_->for_each_message([&](const Message& m) {
     if (m.channel_id != id) return;
-    if (m.data.size() != size)
-      throw Failure{{Errc::damaged, "recording '" + path_ + "': a sample of '" + topic + "' is " + std::to_string(m.data.size()) +
-                                        " bytes, not the " + std::to_string(size) + " of " + type}};
-    t.samples.push_back(m.data);
+    auto bytes = codec ? codec->decode(m.data, what) : m.data;
+    if (bytes.size() != size)
+      throw Failure{{Errc::damaged, what + " is " + std::to_string(bytes.size()) + " bytes, not the " + std::to_string(size) + " of " + type}};
+    t.samples.push_back(std::move(bytes));
     t.stamps.push_back(Clock::time_point{std::chrono::nanoseconds{static_cast<std::int64_t>(m.log_time) - steady_to_unix_}});
   });
   topics_.push_back(std::move(t));

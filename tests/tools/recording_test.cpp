@@ -38,15 +38,24 @@ struct Recorded {
   friend bool operator==(const Recorded&, const Recorded&) = default;
 };
 
+// Message `m` of `file` as the tick it was: its channel's CDR decoded
+// (a described type is recorded as ROS 2 says it).
+Tick tick_of(const record::McapReader& reader, const record::Message& m, const std::string& file) {
+  const auto codec = record::recorded_codec(reader.summary().channels.at(m.channel_id), sizeof(Tick), file);
+  const auto bytes = codec ? codec->decode(m.data, file) : m.data;
+  Tick tick;
+  if (bytes.size() != sizeof tick) throw std::runtime_error{"not a tick"};
+  std::memcpy(&tick, bytes.data(), sizeof tick);
+  return tick;
+}
+
 // The ticks in `file`, in the order written.
 std::vector<Recorded> ticks_in(const std::filesystem::path& file) {
   record::McapReader reader{file};
   const auto offset = record::steady_to_unix_ns(reader.summary(), file);
   std::vector<Recorded> out;
   reader.for_each_message([&](const record::Message& m) {
-    Tick tick;
-    if (m.data.size() != sizeof tick) throw std::runtime_error{"not a tick"};
-    std::memcpy(&tick, m.data.data(), sizeof tick);
+    const auto tick = tick_of(reader, m, file);
     out.push_back({tick.n, Clock::time_point{std::chrono::nanoseconds{static_cast<std::int64_t>(m.log_time) - offset}}, m.log_time});
   });
   return out;
@@ -98,8 +107,13 @@ TEST(PrimeToolRecord, RecordsEveryTickOfAPublisherAndInfoCountsThem) {
   ASSERT_EQ(summary.channels.size(), 1u);
   const auto& channel = summary.channels.begin()->second;
   EXPECT_EQ(channel.topic, "tool/ticks");
-  EXPECT_NE(summary.schemas.at(channel.schema_id).name.find("Tick"), std::string::npos);
-  EXPECT_NE(summary.schemas.at(channel.schema_id).data.find("tag"), std::string::npos);  // the type's description
+  // A described type, as ROS 2 says it: tools that know ROS 2 decode it field by field.
+  const auto& schema = summary.schemas.at(channel.schema_id);
+  EXPECT_EQ(schema.name, "prime_test/msg/Tick");
+  EXPECT_EQ(schema.encoding, "ros2msg");
+  EXPECT_EQ(schema.data, "uint64 n\nfloat64 x\nstring<=8 tag\n");
+  EXPECT_EQ(channel.message_encoding, "cdr");
+  EXPECT_EQ(record::recorded_type(summary, channel), Fingerprint::of<test::Tick>().describe());
   EXPECT_EQ(record::recorded_fingerprint(summary, channel, file), Fingerprint::of<test::Tick>());  // to make its topic again
   EXPECT_EQ(summary.statistics.message_count, 300u);
   // Every sample is in the file or counted lost (overwritten before the
@@ -107,9 +121,16 @@ TEST(PrimeToolRecord, RecordsEveryTickOfAPublisherAndInfoCountsThem) {
   std::optional<std::uint64_t> previous;
   std::uint64_t gaps = 0, last_time = 0;
   reader.for_each_message([&](const record::Message& m) {
-    ASSERT_EQ(m.data.size(), sizeof(test::Tick));
-    test::Tick tick;
-    std::memcpy(&tick, m.data.data(), sizeof tick);
+    // CDR: the header, n, x, then tag as a length (with its NUL) and its characters.
+    ASSERT_GE(m.data.size(), 4u + 8 + 8 + 4);
+    EXPECT_EQ(m.data[0], std::byte{0});
+    EXPECT_EQ(m.data[1], std::byte{1});
+    const auto tick = tick_of(reader, m, file);
+    EXPECT_EQ(tick.x, static_cast<double>(tick.n) / 2);
+    EXPECT_EQ(tick.tag.view(), "t" + std::to_string(tick.n % 100));
+    std::uint32_t tag_length;
+    std::memcpy(&tag_length, m.data.data() + 4 + 16, 4);
+    EXPECT_EQ(tag_length, tick.tag.view().size() + 1);
     if (previous) {
       ASSERT_GT(tick.n, *previous);
       gaps += tick.n - *previous - 1;
@@ -152,9 +173,7 @@ TEST(PrimeToolRecord, ARecorderKilledMidFileLeavesAFileThatIsReadPlayedAndRecove
   std::uint64_t n = 0;
   std::optional<std::uint64_t> previous;
   reader.for_each_message([&](const record::Message& m) {
-    test::Tick tick;
-    ASSERT_EQ(m.data.size(), sizeof tick);
-    std::memcpy(&tick, m.data.data(), sizeof tick);
+    const auto tick = tick_of(reader, m, file);
     if (previous) {
       EXPECT_GT(tick.n, *previous);  // in order, whole: nothing of a cut chunk is read
     }

@@ -31,6 +31,7 @@ struct Played {
   std::string type;                 // as recorded: a Fingerprint's describe()
   std::optional<std::size_t> size;  // a typed topic's sample size; none for bytes
   shm::Publisher<shm::Bytes> publisher;
+  std::optional<rec::CdrCodec> cdr;  // of its channels recorded in CDR (the type's, in every file)
   std::uint64_t sent = 0;
 };
 
@@ -116,12 +117,12 @@ int shm_play(const Options& o, const PlayOptions& p) {
       if (!named.empty() && !named.contains(ch.topic)) continue;
       const auto remapped = remaps.find(ch.topic);
       const auto topic = remapped == remaps.end() ? ch.topic : remapped->second;
-      const auto schema = summary.schemas.find(ch.schema_id);
-      const auto type = schema == summary.schemas.end() ? std::string{} : schema->second.name;
+      const auto type = rec::recorded_type(summary, ch);
       if (const auto it = played.find(topic); it != played.end()) {
         if (it->second->type != type)
           throw Failure{{Errc::type_mismatch, "play: topic '" + topic + "' is recorded as " + it->second->type + " and, in '" +
                                                   files.path(f) + "', as " + type}};
+        if (!it->second->cdr && it->second->size) it->second->cdr = rec::recorded_codec(ch, *it->second->size, files.path(f));
         route[f][id] = it->second.get();
         continue;
       }
@@ -133,7 +134,12 @@ int shm_play(const Options& o, const PlayOptions& p) {
                            .overflow = ch.metadata.contains("overflow") && ch.metadata.at("overflow") == "block"
                                            ? Overflow::block
                                            : Overflow::drop_oldest};
-        publisher.emplace(core.raw_publisher(topic, *fingerprint, schema->second.data, qos));
+        const auto description = ch.metadata.find(rec::kDescriptionEntry);
+        const auto schema = summary.schemas.find(ch.schema_id);
+        const auto text = description != ch.metadata.end()                          ? description->second
+                          : schema != summary.schemas.end() && schema->second.encoding == "prime" ? schema->second.data
+                                                                                    : std::string{};
+        publisher.emplace(core.raw_publisher(topic, *fingerprint, text, qos));
       } else {
         // Recorded without its fingerprint: only onto a topic its readers opened, of the type recorded.
         const auto snapshot = core.registry();
@@ -146,8 +152,9 @@ int shm_play(const Options& o, const PlayOptions& p) {
         publisher.emplace(core.raw_publisher(topic));
       }
       const bool bytes = fingerprint && *fingerprint == Fingerprint::of<shm::Bytes>();
-      auto entry = std::make_unique<Played>(Played{topic, type, fingerprint && !bytes ? std::optional{fingerprint->size} : std::nullopt,
-                                                   std::move(*publisher)});
+      const auto size = fingerprint && !bytes ? std::optional{fingerprint->size} : std::nullopt;
+      auto entry = std::make_unique<Played>(Played{topic, type, size, std::move(*publisher),
+                                                   size ? rec::recorded_codec(ch, *size, files.path(f)) : std::nullopt});
       route[f][id] = entry.get();
       played.emplace(topic, std::move(entry));
     }
@@ -167,6 +174,8 @@ int shm_play(const Options& o, const PlayOptions& p) {
     pass_start = std::max(pass_start, Clock::now());
     for (; m; m = files.next()) {
       auto& t = *route[m->file].at(m->message.channel_id);
+      if (t.cdr && files.file(m->file).summary().channels.at(m->message.channel_id).message_encoding == "cdr")
+        m->message.data = t.cdr->decode(m->message.data, "recording '" + files.path(m->file) + "': a sample of '" + t.topic + "'");
       const auto& data = m->message.data;
       if (t.size && data.size() != *t.size)
         throw Failure{{Errc::damaged, "recording '" + files.path(m->file) + "': a sample of '" + t.topic + "' is " +

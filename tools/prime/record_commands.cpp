@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "json.hpp"
+#include "prime/record/cdr.hpp"
 #include "prime/record/mcap_reader.hpp"
 #include "prime/record/mcap_writer.hpp"
 #include "prime/record/prime_metadata.hpp"
@@ -42,6 +43,8 @@ struct Recorded {
   Reader<shm::View<shm::Bytes>> reader;
   std::size_t index;  // the recorder's
   std::size_t capacity;
+  std::optional<rec::CdrCodec> cdr;  // its samples written as CDR, through `encoded`
+  std::vector<std::byte> encoded;
   std::uint64_t written = 0;
   std::uint64_t lost = 0;
 };
@@ -89,12 +92,23 @@ int shm_record(const Options& o, const RecordOptions& r) {
       if (known.contains(t.name) || !wanted(t.name)) continue;
       known.insert(t.name);
       auto metadata = rec::fingerprint_metadata(t.fingerprint);
-      metadata.insert({{"type", t.type},
+      metadata.insert({{rec::kTypeEntry, t.type},
                        {"capacity", std::to_string(t.qos.capacity)},
                        {"max_message_size", std::to_string(t.qos.max_message_size)},
                        {"overflow", t.qos.overflow == Overflow::block ? "block" : "drop_oldest"}});
-      const auto topic = file.add_topic({0, t.type, "prime", t.schema}, {0, 0, t.name, "prime-raw", metadata});
-      recorded.push_back(std::make_unique<Recorded>(Recorded{t.name, core.observe(t.name), topic, t.qos.capacity}));
+      // A described type as ROS 2 says it (ros2msg, CDR), which tools that
+      // know ROS 2 decode field by field; any other as its bytes, under a
+      // schema that names it.
+      auto cdr = t.fingerprint == Fingerprint::of<shm::Bytes>() ? std::nullopt : rec::CdrCodec::of(t.schema, t.fingerprint.size);
+      std::size_t topic = 0;
+      if (cdr) {
+        metadata[rec::kDescriptionEntry] = t.schema;
+        const auto name = rec::ros2_name(read_text(t.fingerprint.name));
+        topic = file.add_topic({0, name, "ros2msg", cdr->definition(name)}, {0, 0, t.name, "cdr", metadata});
+      } else {
+        topic = file.add_topic({0, t.type, "prime", t.schema}, {0, 0, t.name, "prime-raw", metadata});
+      }
+      recorded.push_back(std::make_unique<Recorded>(Recorded{t.name, core.observe(t.name), topic, t.qos.capacity, std::move(cdr), {}}));
     }
   };
   open(snapshot, true);
@@ -117,7 +131,10 @@ int shm_record(const Options& o, const RecordOptions& r) {
       const auto arrived = Clock::now();
       const auto log_time = static_cast<std::uint64_t>(sample->stamp.time_since_epoch().count() + steady_to_unix);
       const auto publish_time = static_cast<std::uint64_t>(arrived.time_since_epoch().count() + steady_to_unix);
-      file.write(t.index, static_cast<std::uint32_t>(sample->value.sequence()), log_time, publish_time, sample->value.bytes());
+      const auto bytes = sample->value.bytes();
+      if (t.cdr) t.cdr->encode(bytes, t.encoded);
+      file.write(t.index, static_cast<std::uint32_t>(sample->value.sequence()), log_time, publish_time,
+                 t.cdr ? std::span<const std::byte>{t.encoded} : bytes);
       ++t.written;
       ++total;
       any = true;
@@ -171,10 +188,7 @@ int record_info(const Options& o, const std::string& path) {
     const auto it = st.channel_message_counts.find(id);
     return it == st.channel_message_counts.end() ? std::uint64_t{0} : it->second;
   };
-  auto type_of = [&](const rec::Channel& ch) {
-    const auto it = s.schemas.find(ch.schema_id);
-    return it == s.schemas.end() ? std::string{} : it->second.name;
-  };
+  auto type_of = [&](const rec::Channel& ch) { return rec::recorded_type(s, ch); };
   auto lost_of = [&](const rec::Channel& ch) -> std::string {
     const auto it = losses.find(ch.topic);
     return it == losses.end() ? std::string{"?"} : it->second;

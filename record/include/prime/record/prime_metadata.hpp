@@ -6,6 +6,7 @@
 #include <string>
 
 #include "prime/common/fingerprint.hpp"
+#include "prime/record/cdr.hpp"
 #include "prime/record/mcap.hpp"
 
 namespace prime::record {
@@ -21,11 +22,28 @@ inline constexpr auto kLossesMetadata = "prime.losses";  // per topic: samples o
 // so a topic can be made again with the type its readers will open.
 [[nodiscard]] std::map<std::string, std::string> fingerprint_metadata(const Fingerprint& type);
 // The fingerprint channel `channel` was recorded with, checked against
-// its schema's name (a Fingerprint's describe()); nullopt for a channel
+// the type it names (recorded_type); nullopt for a channel
 // recorded without one. Throws Failure (Errc::damaged, naming `file`)
-// when the entries are malformed or disagree with the schema.
+// when the entries are malformed or disagree with that type.
 [[nodiscard]] std::optional<Fingerprint> recorded_fingerprint(const Summary& summary, const Channel& channel,
                                                              const std::string& file);
+
+// A channel's metadata entry with the type's description (schema_of's
+// text), for a channel whose schema is its ros2msg definition instead.
+inline constexpr auto kDescriptionEntry = "prime_description";
+// Its entry with the type's Fingerprint::describe().
+inline constexpr auto kTypeEntry = "type";
+
+// The type a channel's samples are, as a Fingerprint's describe(): its
+// metadata entry, or (written before there was one) its schema's name;
+// "bytes of no type" for a channel with neither.
+[[nodiscard]] std::string recorded_type(const Summary& summary, const Channel& channel);
+
+// For a channel recorded in CDR (message encoding "cdr"), the codec that
+// turns its messages back into the type's `size` bytes; nullopt for one
+// recorded as the bytes themselves. Throws Failure (Errc::damaged, naming
+// `file`) for a CDR channel without a usable description.
+[[nodiscard]] std::optional<CdrCodec> recorded_codec(const Channel& channel, std::size_t size, const std::string& file);
 
 // What a recording's stamps (steady_clock, as published) were shifted by
 // to be written as Unix time; 0 when it says nothing. Throws Failure
