@@ -12,16 +12,13 @@
 
 namespace prime::record {
 
-namespace {
-// "drive.mcap", 3 -> "drive_3.mcap"
-std::string numbered(const std::string& path, std::size_t n) {
+std::string numbered_path(const std::string& path, std::size_t n) {
   const auto dot = path.rfind('.');
   const auto slash = path.rfind('/');
   const bool has_extension = dot != std::string::npos && (slash == std::string::npos || dot > slash);
   const auto stem = has_extension ? path.substr(0, dot) : path;
   return stem + "_" + std::to_string(n) + (has_extension ? path.substr(dot) : std::string{});
 }
-}  // namespace
 
 Recorder::Recorder(std::string path, RecorderOptions options) : path_{std::move(path)}, options_{std::move(options)} {
   begin_file();  // here, so that a file that cannot be made is this constructor's error
@@ -166,7 +163,7 @@ void Recorder::begin_file() {
   std::string name;
   {
     std::scoped_lock lock{mutex_};
-    name = split ? numbered(path_, files_.size()) : path_;
+    name = split ? numbered_path(path_, files_.size()) : path_;
   }
   file_ = std::make_unique<McapWriter>(name, options_.file);
   {

@@ -15,6 +15,7 @@
 #include "prime/record/mcap_reader.hpp"
 #include "prime/record/prime_metadata.hpp"
 #include "prime/record/recorder.hpp"
+#include "prime/record/snapshot_recorder.hpp"
 
 namespace {
 
@@ -37,7 +38,7 @@ std::vector<std::byte> bytes_of(std::uint64_t i) {
   return b;
 }
 
-std::size_t add(rec::Recorder& r, const std::string& topic) {
+std::size_t add(rec::Sink& r, const std::string& topic) {
   return r.add_topic({0, "Thing (24 bytes, align 8, layout 1)", "prime", "Thing: n u64"}, {0, 0, topic, "prime-raw", {{"k", "v"}}});
 }
 
@@ -162,6 +163,48 @@ TEST(Recorder, ATopicAddedLaterIsInEveryFileFromItsFirstMessageOn) {
   const auto all = read_all(files);
   ASSERT_EQ(all.size(), 400u);
   for (std::uint64_t i = 200; i < 400; ++i) EXPECT_EQ(all[i].topic, i % 2 ? "a" : "b");
+}
+
+TEST(SnapshotRecorder, EachTakeWritesTheLastWindowWithTheLossesThatFellInIt) {
+  TempDir dir;
+  constexpr std::uint64_t kMs = 1'000'000;
+  rec::SnapshotRecorder snapshots{(dir.path / "crash.mcap").string(), {}, 1000 * kMs};
+  snapshots.add_metadata({rec::kClockMetadata, {{"steady_to_unix_ns", "7"}}});
+  const auto a = add(snapshots, "a");
+  std::uint64_t lost = 0;
+  for (std::uint64_t i = 0; i < 5000; ++i) {  // 5 s, one a millisecond
+    snapshots.write(a, static_cast<std::uint32_t>(i), i * kMs, i * kMs, bytes_of(i));
+    if (i % 1000 == 500) snapshots.lost(a, lost += 10);  // at 0.5, 1.5, 2.5, 3.5 and 4.5 s
+  }
+  EXPECT_EQ(snapshots.held_span(), 1000 * kMs);
+  const auto [first, messages] = snapshots.take();
+  EXPECT_EQ(first, (dir.path / "crash_0.mcap").string());
+  EXPECT_EQ(messages, 1001u) << "from 3.999 s to 4.999 s";
+  for (std::uint64_t i = 5000; i < 5100; ++i) snapshots.write(a, 0, i * kMs, i * kMs, bytes_of(i));
+  const auto [second, more] = snapshots.take();
+  snapshots.close();
+  const auto all = read_all({first});
+  ASSERT_EQ(all.size(), 1001u);
+  EXPECT_EQ(all.front().n, 3999u);
+  EXPECT_EQ(all.back().n, 4999u);
+  rec::McapReader reader{first};
+  EXPECT_EQ(metadata_named(reader.summary(), rec::kLossesMetadata).at("a"), "10") << "only the loss at 4.5 s";
+  EXPECT_EQ(metadata_named(reader.summary(), rec::kClockMetadata).at("steady_to_unix_ns"), "7");
+  const auto later = read_all({second});
+  ASSERT_EQ(later.size(), more);
+  EXPECT_EQ(later.back().n, 5099u);
+  EXPECT_EQ(snapshots.files().size(), 2u);
+}
+
+TEST(SnapshotRecorder, AMemoryBoundShortensTheWindow) {
+  TempDir dir;
+  rec::SnapshotRecorder snapshots{(dir.path / "bounded.mcap").string(), {}, 10'000'000'000, 24 * 100};
+  const auto a = add(snapshots, "a");
+  for (std::uint64_t i = 0; i < 1000; ++i) snapshots.write(a, 0, i, i, bytes_of(i));  // 24 bytes each
+  const auto [file, messages] = snapshots.take();
+  snapshots.close();
+  EXPECT_EQ(messages, 100u) << "the newest that fit in 2400 bytes";
+  EXPECT_EQ(read_all({file}).front().n, 900u);
 }
 
 TEST(Recorder, AFileThatCannotBeMadeIsTheConstructorsErrorAndAClosedOneRefusesMore) {

@@ -300,6 +300,53 @@ TEST(PrimeToolRecord, SplitFilesHoldEverySampleOnceAndPlayAsOne) {
   for (const auto& f : files) std::filesystem::remove(f);
 }
 
+// --snapshot: only the last seconds in memory; each SIGUSR1 writes them
+// into the next file of a series while the reading goes on.
+TEST(PrimeToolRecord, ASnapshotHoldsTheLastSecondsAndIsWrittenOnASignal) {
+  const auto domain = unique_domain("tool-record-snap");
+  const auto stem = (std::filesystem::temp_directory_path() / domain).string();
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "500", "0"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  shm::Core core{domain};
+  auto published = [&] {
+    for (const auto& t : core.registry().topics)
+      if (t.name == "tool/ticks") return t.published;
+    return std::uint64_t{0};
+  };
+  auto recorder = PeerProcess::command(
+      {PRIME_TOOL_PATH, "--domain", domain, "record", "tool/ticks", "-o", stem + ".mcap", "--snapshot", "0.5"}, true);
+  ASSERT_TRUE(recorder.line_starting("prime: keeping the last 0.5 s in memory", 10s));
+  std::vector<std::vector<Recorded>> taken;
+  for (int k = 0; k < 2; ++k) {
+    const auto from = published();
+    ASSERT_TRUE(within(30s, [&] { return published() >= from + 600; })) << "more than its window published";
+    ::kill(recorder.pid(), SIGUSR1);
+    const auto file = stem + "_" + std::to_string(k) + ".mcap";
+    const auto said = recorder.line_starting("prime: " + file + ": the last ", 10s);
+    ASSERT_TRUE(said);
+    ASSERT_TRUE(within(10s, [&] {
+      try {
+        return record::McapReader{file}.complete();
+      } catch (const Failure&) {
+        return false;  // not yet whole
+      }
+    }));
+    taken.push_back(ticks_in(file));
+    const auto& t = taken.back();
+    ASSERT_GE(t.size(), 150u) << *said;
+    EXPECT_LE(t.size(), 300u) << "0.5 s at 500 Hz: " << *said;
+    EXPECT_LE(t.back().stamp - t.front().stamp, 550ms);
+    EXPECT_NE(said->find(std::to_string(t.size()) + " samples"), std::string::npos) << *said;
+    for (std::size_t i = 1; i < t.size(); ++i) ASSERT_EQ(t[i].n, t[i - 1].n + 1) << "every sample of its window, in order";
+    std::filesystem::remove(file);
+  }
+  EXPECT_GT(taken[1].front().n, taken[0].back().n) << "the second window is later";
+  ::kill(recorder.pid(), SIGINT);
+  EXPECT_EQ(recorder.exit_code(10s), 0);
+  EXPECT_FALSE(std::filesystem::exists(stem + "_2.mcap"));
+  EXPECT_FALSE(std::filesystem::exists(stem + ".mcap")) << "a snapshot recorder writes only when asked";
+}
+
 // Played at its timing, each sample with the stamp it was recorded with;
 // at four times the speed, with stamps of when it is published.
 TEST(PrimeToolPlay, PublishesARecordingAtItsTimingWithItsStamps) {

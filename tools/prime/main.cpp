@@ -170,6 +170,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 50));
   record->add_option("--max-duration", rec.max_duration, "seconds a file spans before the next is begun")
       ->check(number_in(1e-3, kMaxSeconds, "from 0.001 to 31536000 seconds"));
+  record->add_option("--snapshot", rec.snapshot, "keep only the last S seconds in memory; each SIGUSR1 writes them (FILE_0.mcap, ...)")
+      ->check(number_in(1e-3, 3600, "from 0.001 to 3600 seconds"));
   record->add_option("--duration", o.duration, "seconds to record (default: until Ctrl-C)")->check(number_in(0, kMaxSeconds, kSecondsText));
   record->add_option("-n,--count", o.count, "stop after this many samples");
   auto* info_of_recording = record->add_subcommand("info", "what a recording holds: topics, types, counts, rates, losses");

@@ -3,7 +3,10 @@
 // file; prime record info: what a recording holds.
 #include "record_commands.hpp"
 
+#include <unistd.h>
+
 #include <chrono>
+#include <csignal>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
@@ -19,6 +22,7 @@
 #include "prime/record/mcap_writer.hpp"
 #include "prime/record/prime_metadata.hpp"
 #include "prime/record/recorder.hpp"
+#include "prime/record/snapshot_recorder.hpp"
 #include "prime/shm.hpp"
 #include "stats.hpp"
 #include "table.hpp"
@@ -49,6 +53,9 @@ struct Recorded {
   std::uint64_t lost = 0;
 };
 
+// Set by SIGUSR1: write a snapshot.
+volatile std::sig_atomic_t snapshot_asked = 0;
+
 }  // namespace
 
 int shm_record(const Options& o, const RecordOptions& r) {
@@ -65,10 +72,22 @@ int shm_record(const Options& o, const RecordOptions& r) {
   }
   const auto snapshot = snapshot_of(o);
   shm::Core core{o.domain, joining(o, "prime record")};
-  rec::Recorder file{r.out,
-                     {.file = {.compression = compression_named(r.compression), .chunk_size = r.chunk_size, .profile = ""},
-                      .max_size = r.max_size,
-                      .max_duration = static_cast<std::uint64_t>(r.max_duration * 1e9)}};
+  const rec::RecorderOptions options{
+      .file = {.compression = compression_named(r.compression), .chunk_size = r.chunk_size, .profile = ""},
+      .max_size = r.max_size,
+      .max_duration = static_cast<std::uint64_t>(r.max_duration * 1e9)};
+  // Every sample into the file (or a series), or, with --snapshot, the
+  // last seconds in memory, into a file of a series at each SIGUSR1.
+  rec::SnapshotRecorder* snapshots = nullptr;
+  std::unique_ptr<rec::Sink> sink;
+  if (r.snapshot > 0) {
+    auto s = std::make_unique<rec::SnapshotRecorder>(r.out, options, static_cast<std::uint64_t>(r.snapshot * 1e9));
+    snapshots = s.get();
+    sink = std::move(s);
+  } else {
+    sink = std::make_unique<rec::Recorder>(r.out, options);
+  }
+  auto& file = *sink;
   // Stamps are steady_clock (one clock for every process of the machine):
   // written as Unix time, by one offset taken now and kept in the file.
   const auto steady_to_unix = std::chrono::duration_cast<std::chrono::nanoseconds>(
@@ -115,6 +134,10 @@ int shm_record(const Options& o, const RecordOptions& r) {
   if (recorded.empty()) std::cerr << "prime: no topic to record yet; waiting for some (--all)\n";
 
   finish_on_ctrl_c();
+  if (snapshots) {
+    std::signal(SIGUSR1, [](int) { snapshot_asked = 1; });
+    std::cerr << "prime: keeping the last " << r.snapshot << " s in memory; kill -USR1 " << ::getpid() << " writes them\n";
+  }
   const auto start = Clock::now();
   const auto until = o.duration > 0 ? start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration))
                                     : Clock::time_point::max();
@@ -145,6 +168,12 @@ int shm_record(const Options& o, const RecordOptions& r) {
   while (!ctrl_c_pressed() && Clock::now() < until && (o.count == 0 || total < o.count)) {
     bool any = false;
     for (auto& t : recorded) any = read_some(*t, 256) || any;
+    if (snapshots && snapshot_asked) {
+      snapshot_asked = 0;
+      const auto span = static_cast<double>(snapshots->held_span()) / 1e9;
+      const auto [name, messages] = snapshots->take();
+      std::cerr << "prime: " << name << ": the last " << fixed(span, 3) << " s, " << messages << " samples\n";
+    }
     if (r.all && Clock::now() >= next_look) {
       open(core.registry(), false);
       next_look = Clock::now() + 1s;
@@ -161,6 +190,10 @@ int shm_record(const Options& o, const RecordOptions& r) {
   for (const auto& t : recorded)
     std::cerr << "prime: recorded " << t->written << " samples of '" << t->topic << "', lost " << t->lost << '\n';
   const auto files = file.files();
+  if (files.empty()) {
+    std::cerr << "prime: no snapshot was asked for: nothing written\n";
+    return after_ctrl_c(o.duration <= 0 && o.count == 0, int{kOk});
+  }
   std::cerr << "prime: " << (files.size() == 1 ? files.front() : std::to_string(files.size()) + " files, " + files.front() + " to " + files.back())
             << ": " << file.bytes_written() << " bytes\n";
   const bool open_ended = o.duration <= 0 && o.count == 0;

@@ -20,6 +20,7 @@ struct RecordOptions {
   std::size_t chunk_size = 1 << 20;
   std::uint64_t max_size = 0;  // bytes a file reaches before the next is begun (0: one file)
   double max_duration = 0;     // seconds a file spans before the next is begun (0: one file)
+  double snapshot = 0;         // seconds kept in memory, written at each SIGUSR1 (0: record everything)
 };
 
 int shm_record(const Options& o, const RecordOptions& r);

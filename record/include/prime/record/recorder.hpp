@@ -17,6 +17,31 @@
 
 namespace prime::record {
 
+// What the reading side of a recording writes into: a Recorder (every
+// sample, into one file or a series), or a SnapshotRecorder (the last
+// seconds, into a file when asked). One thread.
+class Sink {
+ public:
+  virtual ~Sink() = default;
+  // A topic, written as a schema and a channel; its index for write().
+  virtual std::size_t add_topic(const Schema& schema, const Channel& channel) = 0;
+  virtual void add_metadata(const Metadata& metadata) = 0;
+  // How many samples of `topic` were lost before they were read, so far.
+  virtual void lost(std::size_t topic, std::uint64_t so_far) = 0;
+  virtual void write(std::size_t topic, std::uint32_t sequence, std::uint64_t log_time, std::uint64_t publish_time,
+                     std::span<const std::byte> data) = 0;
+  // Nothing more to read for a while: a moment to hand over what is collected.
+  virtual void flush() = 0;
+  // Writes what there is to write, and closes. Once.
+  virtual void close() = 0;
+  // The files written so far, in order; and their bytes.
+  [[nodiscard]] virtual std::vector<std::string> files() const = 0;
+  [[nodiscard]] virtual std::uint64_t bytes_written() const = 0;
+};
+
+// "drive.mcap", 3: "drive_3.mcap", a file of a series.
+[[nodiscard]] std::string numbered_path(const std::string& path, std::size_t n);
+
 struct RecorderOptions {
   WriterOptions file;                 // each file's compression and chunk size
   std::uint64_t max_size = 0;         // bytes a file reaches before the next is begun (0: one file)
@@ -36,38 +61,38 @@ struct RecorderOptions {
 // The writer's error (Errc::no_space on a full disk, say) is thrown by the
 // next write() or close(); what was written before it stays readable.
 // add_topic, add_metadata, lost, write, flush and close: one thread.
-class Recorder {
+class Recorder final : public Sink {
  public:
   Recorder(std::string path, RecorderOptions options);
   Recorder(const Recorder&) = delete;
   Recorder& operator=(const Recorder&) = delete;
-  ~Recorder();  // close(), its error lost
+  ~Recorder() override;  // close(), its error lost
 
   // A topic, written as a schema and a channel into the file being written
   // and every file after it; its index for write().
-  std::size_t add_topic(const Schema& schema, const Channel& channel);
+  std::size_t add_topic(const Schema& schema, const Channel& channel) override;
   // Metadata written into every file from the next on, and this one if
   // nothing is written yet (the clock, say).
-  void add_metadata(const Metadata& metadata);
+  void add_metadata(const Metadata& metadata) override;
   // How many samples of `topic` were lost before the reading side read
   // them, so far: each file's metadata `prime.losses` counts those lost
   // between its first message and its last.
-  void lost(std::size_t topic, std::uint64_t so_far);
+  void lost(std::size_t topic, std::uint64_t so_far) override;
   // Queues a message (collected here, handed to the writer a batch at a
   // time); waits while `max_queued` bytes are queued.
   void write(std::size_t topic, std::uint32_t sequence, std::uint64_t log_time, std::uint64_t publish_time,
-             std::span<const std::byte> data);
+             std::span<const std::byte> data) override;
   // Hands what is collected to the writer now: for the reading side to
   // call when it has nothing more to read for a while.
-  void flush();
+  void flush() override;
   // Writes what is queued and closes the last file. Once.
-  void close();
+  void close() override;
 
   // The files begun so far, in order.
-  [[nodiscard]] std::vector<std::string> files() const;
+  [[nodiscard]] std::vector<std::string> files() const override;
   // Bytes in the files closed so far; messages written; the most bytes
   // ever queued at once.
-  [[nodiscard]] std::uint64_t bytes_written() const;
+  [[nodiscard]] std::uint64_t bytes_written() const override;
   [[nodiscard]] std::uint64_t messages_written() const;
   [[nodiscard]] std::size_t most_queued() const;
 
