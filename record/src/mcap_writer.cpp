@@ -72,7 +72,7 @@ struct McapWriter::State {
       if (n < 0 && errno == EINTR) continue;
       if (n < 0) {
         const int e = errno;
-        const auto code = e == ENOSPC || e == EDQUOT ? Errc::no_space : Errc::unreachable;
+        const auto code = e == ENOSPC || e == EDQUOT || e == EFBIG ? Errc::no_space : Errc::unreachable;  // EFBIG: a file size limit
         throw Failure{{code, "recording '" + path + "': writing failed after " + std::to_string(offset + at) +
                                  " bytes: " + std::strerror(e) +
                                  " (what was written up to the last complete chunk stays readable)"}};

@@ -3,12 +3,15 @@
 // its own with every topic, its metadata and its share of the losses.
 #include <gtest/gtest.h>
 
+#include <signal.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -163,6 +166,52 @@ TEST(Recorder, ATopicAddedLaterIsInEveryFileFromItsFirstMessageOn) {
   const auto all = read_all(files);
   ASSERT_EQ(all.size(), 400u);
   for (std::uint64_t i = 200; i < 400; ++i) EXPECT_EQ(all[i].topic, i % 2 ? "a" : "b");
+}
+
+// A file size limit (RLIMIT_FSIZE) stands in for a full disk: a write past
+// it fails (EFBIG, SIGXFSZ ignored) as one past a full disk does (ENOSPC).
+struct FileSizeLimit {
+  explicit FileSizeLimit(rlim_t bytes) {
+    ::getrlimit(RLIMIT_FSIZE, &before);
+    const rlimit limit{bytes, before.rlim_max};
+    ::setrlimit(RLIMIT_FSIZE, &limit);
+    ::signal(SIGXFSZ, SIG_IGN);
+  }
+  ~FileSizeLimit() {
+    ::setrlimit(RLIMIT_FSIZE, &before);
+    ::signal(SIGXFSZ, SIG_DFL);
+  }
+  rlimit before{};
+};
+
+TEST(Recorder, AFullDiskIsNoSpaceAndWhatWasWrittenStaysReadable) {
+  TempDir dir;
+  const auto path = (dir.path / "full.mcap").string();
+  std::optional<prime::Error> error;
+  {
+    FileSizeLimit full{64 * 1024};
+    try {
+      rec::Recorder recorder{path, {.file = {.compression = rec::Compression::none, .chunk_size = 4096, .profile = ""}}};
+      const auto a = add(recorder, "a");
+      for (std::uint64_t i = 0; i < 100'000; ++i) recorder.write(a, 0, i, i, bytes_of(i));  // 2.4 MB
+      recorder.close();
+    } catch (const prime::Failure& f) {
+      error = f.error();
+    }
+  }
+  ASSERT_TRUE(error) << "2.4 MB written into room for 64 KiB";
+  EXPECT_EQ(error->code, prime::Errc::no_space);
+  EXPECT_NE(error->message.find(path), std::string::npos) << error->message;
+  EXPECT_NE(error->message.find("stays readable"), std::string::npos) << error->message;
+  rec::McapReader reader{path};
+  EXPECT_FALSE(reader.complete());
+  std::uint64_t n = 0;
+  reader.for_each_message([&](const rec::Message& m) {
+    std::uint64_t v;
+    std::memcpy(&v, m.data.data(), sizeof v);
+    EXPECT_EQ(v, n++) << "whole, in order, up to the last complete chunk";
+  });
+  EXPECT_GT(n, 500u) << "about 64 KiB of 55-byte records";
 }
 
 TEST(SnapshotRecorder, EachTakeWritesTheLastWindowWithTheLossesThatFellInIt) {

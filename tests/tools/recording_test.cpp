@@ -258,6 +258,27 @@ TEST(PrimeToolRecord, BadFilesAndOptionsAreRefusedByName) {
 }
 
 
+// A full disk (a file size limit stands in for it) stops the recorder
+// with the reason, and what it wrote before stays readable.
+TEST(PrimeToolRecord, AFullDiskStopsTheRecorderByNameAndKeepsWhatItWrote) {
+  const auto domain = unique_domain("tool-record-full");
+  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "2000", "0"}};
+  ASSERT_TRUE(ticks.says("publishing"));
+  const auto full = finished({"prlimit", "--fsize=65536", PRIME_TOOL_PATH, "--domain", domain, "record", "tool/ticks", "-o",
+                              file.string(), "--chunk-size", "1024", "--duration", "60"});
+  EXPECT_EQ(full.code, 1) << full.out;
+  EXPECT_NE(full.out.find("writing failed after"), std::string::npos) << full.out;
+  EXPECT_NE(full.out.find("stays readable"), std::string::npos) << full.out;
+  const auto kept = ticks_in(file);
+  EXPECT_GT(kept.size(), 200u);
+  for (std::size_t i = 1; i < kept.size(); ++i) EXPECT_GT(kept[i].n, kept[i - 1].n);
+  const auto info = prime(domain, {"record", "info", file});
+  EXPECT_EQ(info.code, 0) << info.out;
+  EXPECT_NE(info.out.find("cut short"), std::string::npos) << info.out;
+  std::filesystem::remove(file);
+}
+
 // Split by size: a series of files that, played as one timeline, hold
 // every sample recorded once, the losses counted in the file they fell in.
 TEST(PrimeToolRecord, SplitFilesHoldEverySampleOnceAndPlayAsOne) {

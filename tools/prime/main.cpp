@@ -219,6 +219,9 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : int{kUsage};
   }
   std::signal(SIGINT, [](int) { std::_Exit(kInterrupted); });  // replaced by commands that want to finish their report
+  // A file past its size limit (ulimit -f) is an error the command reports
+  // (EFBIG, a recording's no_space), not a signal that kills it mid-write.
+  std::signal(SIGXFSZ, SIG_IGN);
   try {
     check_name("domain", o.domain);
     check_name("name", o.name);
