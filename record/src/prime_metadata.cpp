@@ -67,7 +67,10 @@ std::string recorded_type(const Summary& summary, const Channel& channel) {
 }
 
 std::optional<CdrCodec> recorded_codec(const Channel& channel, std::size_t size, const std::string& file) {
-  if (channel.message_encoding != "cdr") return std::nullopt;
+  if (channel.message_encoding == "prime-raw") return std::nullopt;
+  if (channel.message_encoding != "cdr")
+    throw Failure{{Errc::type_mismatch, "recording '" + file + "': topic '" + channel.topic + "' is in message encoding '" +
+                                            channel.message_encoding + "', not a type's bytes or CDR"}};
   const auto it = channel.metadata.find(kDescriptionEntry);
   auto codec = it == channel.metadata.end() ? std::nullopt : CdrCodec::of(it->second, size);
   if (!codec)

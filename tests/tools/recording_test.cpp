@@ -10,9 +10,12 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <thread>
 #include <string>
 #include <vector>
 
+#include "optimus/support/redis_server.hpp"
+#include "prime/optimus.hpp"
 #include "prime/record/mcap_reader.hpp"
 #include "prime/record/prime_metadata.hpp"
 #include "prime/shm.hpp"
@@ -276,6 +279,45 @@ TEST(PrimeToolRecord, AFullDiskStopsTheRecorderByNameAndKeepsWhatItWrote) {
   const auto info = prime(domain, {"record", "info", file});
   EXPECT_EQ(info.code, 0) << info.out;
   EXPECT_NE(info.out.find("cut short"), std::string::npos) << info.out;
+  std::filesystem::remove(file);
+}
+
+// An Optimus source (--redis), recorded as the messages Optimus sent:
+// readable back as its type, every one from the first on, none lost; play
+// (which publishes into shared memory) refuses it by name.
+TEST(PrimeToolRecord, RecordsAnOptimusSourceAsItsMessages) {
+  RedisServer server;
+  const auto domain = unique_domain("tool-record-optimus");
+  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
+  optimus::Core core{optimus::Options{.url = server.url(), .domain = domain}};
+  auto ticks = core.publisher<int>("ticks");
+  auto recorder = PeerProcess::command(
+      {PRIME_TOOL_PATH, "--domain", domain, "--redis", server.url(), "record", "ticks", "-o", file.string(), "-n", "50"}, true);
+  // Published at 500 Hz until the recorder has its 50 (it reads from when it joined).
+  int published = 0;
+  for (auto next = Clock::now(); published < 20000 && !recorder.exit_code(0ms); next += 2ms) {
+    std::this_thread::sleep_until(next);
+    ASSERT_TRUE(ticks.publish(published++));
+  }
+  const auto out = recorder.all_output();
+  ASSERT_EQ(recorder.exit_code(10s), 0) << out;
+  EXPECT_NE(out.find("recorded 50 samples of 'ticks', lost 0"), std::string::npos) << out;
+  record::McapReader reader{file};
+  ASSERT_TRUE(reader.complete());
+  const auto& channel = reader.summary().channels.begin()->second;
+  EXPECT_EQ(channel.message_encoding, "prime-optimus");
+  EXPECT_EQ(record::recorded_type(reader.summary(), channel), Fingerprint::of<int>().describe());
+  std::vector<int> values;
+  reader.for_each_message([&](const record::Message& m) {
+    const auto v = optimus::decode_message<int>(std::string_view{reinterpret_cast<const char*>(m.data.data()), m.data.size()}, "ticks");
+    ASSERT_TRUE(v) << v.error().message;
+    values.push_back(*v);
+  });
+  ASSERT_EQ(values.size(), 50u);
+  for (std::size_t i = 1; i < values.size(); ++i) EXPECT_EQ(values[i], values[i - 1] + 1) << "every one, in order";
+  const auto play = prime(unique_domain("tool-record-optimus-play"), {"play", file});
+  EXPECT_EQ(play.code, 2) << play.out;
+  EXPECT_NE(play.out.find("recorded from Optimus"), std::string::npos) << play.out;
   std::filesystem::remove(file);
 }
 

@@ -184,11 +184,7 @@ int main(int argc, char** argv) {
   recover->callback([&] { run = [&] { return record_recover(recording, recovered); }; });
   record->callback([&, info_of_recording, recover, redis] {
     if (info_of_recording->parsed() || recover->parsed()) return;
-    run = redis ? std::function<int()>{[] {
-      std::cerr << "prime: record is for shared-memory domains (recording Optimus sources is not built yet)\n";
-      return int{kUsage};
-    }}
-                : std::function<int()>{[&] { return shm_record(o, rec); }};
+    run = redis ? std::function<int()>{[&] { return optimus_record(o, rec); }} : std::function<int()>{[&] { return shm_record(o, rec); }};
   });
   PlayOptions play_options;
   auto* play = command("play", "publish recordings into the domain at their recorded timing, as one timeline",

@@ -24,10 +24,12 @@ namespace {
 
 using prime::optimus::Inspector;
 
+}  // namespace
+
 // An inspector of the domain on the server of --redis. Credentials come in
 // the URL (tcp://user:password@host:port), or, kept off the command line
 // (where `ps` shows them), from PRIME_REDIS_USER and PRIME_REDIS_PASSWORD.
-Inspector inspector(const Options& o) {
+Inspector optimus_inspector(const Options& o) {
   prime::optimus::Options options{.url = o.redis, .domain = o.domain};
   if (const char* password = std::getenv("PRIME_REDIS_PASSWORD"); password && *password) {
     options.password = password;
@@ -35,6 +37,8 @@ Inspector inspector(const Options& o) {
   }
   return Inspector{std::move(options)};
 }
+
+namespace {
 
 template <class Summary>
 const Summary* named(const std::vector<Summary>& all, const std::string& name) {
@@ -46,7 +50,7 @@ const Summary* named(const std::vector<Summary>& all, const std::string& name) {
 }  // namespace
 
 int optimus_ls(const Options& o) {
-  auto r = inspector(o);
+  auto r = optimus_inspector(o);
   const auto sources = r.sources();
   const auto services = r.services();
   if (sources.empty() && services.empty())
@@ -82,7 +86,7 @@ int optimus_ls(const Options& o) {
 }
 
 int optimus_info(const Options& o) {
-  auto r = inspector(o);
+  auto r = optimus_inspector(o);
   const auto sources = r.sources();  // named() points into these: they outlive its use
   const auto services = r.services();
   if (const auto* s = named(sources, o.name)) {
@@ -98,7 +102,7 @@ int optimus_info(const Options& o) {
 }
 
 int optimus_watch(const Options& o, const std::string& command) {
-  auto r = inspector(o);
+  auto r = optimus_inspector(o);
   if (!named(r.sources(), o.name))
     throw Failure{{Errc::not_found, "no source '" + o.name + "' in Optimus domain '" + o.domain + "'"}};
   auto tail = r.tail(o.name);
@@ -132,7 +136,7 @@ int optimus_watch(const Options& o, const std::string& command) {
 }
 
 int optimus_graph(const Options& o) {
-  auto r = inspector(o);
+  auto r = optimus_inspector(o);
   std::cout << "digraph prime {\n  rankdir=LR;\n  label=" << quote("optimus domain " + o.domain) << ";\n";
   for (const auto& s : r.sources())
     std::cout << "  " << quote("source:" + s.name) << " [shape=ellipse, label=" << dot_label({s.name, s.type}) << "];\n";

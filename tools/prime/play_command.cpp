@@ -115,6 +115,11 @@ int shm_play(const Options& o, const PlayOptions& p) {
     steady_to_unix[f] = rec::steady_to_unix_ns(summary, files.path(f));
     for (const auto& [id, ch] : summary.channels) {
       if (!named.empty() && !named.contains(ch.topic)) continue;
+      if (ch.message_encoding != "prime-raw" && ch.message_encoding != "cdr")
+        throw Failure{{Errc::invalid_argument, "play: topic '" + ch.topic + "' of '" + files.path(f) + "' is in message encoding '" +
+                                                   ch.message_encoding + "' (" +
+                                                   (ch.message_encoding == "prime-optimus" ? "recorded from Optimus" : "not Prime's") +
+                                                   "): play publishes recordings of shared-memory topics; --topics leaves it out"}};
       const auto remapped = remaps.find(ch.topic);
       const auto topic = remapped == remaps.end() ? ch.topic : remapped->second;
       const auto type = rec::recorded_type(summary, ch);

@@ -9,6 +9,7 @@
 #include <csignal>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -23,6 +24,7 @@
 #include "prime/record/prime_metadata.hpp"
 #include "prime/record/recorder.hpp"
 #include "prime/record/snapshot_recorder.hpp"
+#include "prime/optimus/inspect.hpp"
 #include "prime/shm.hpp"
 #include "stats.hpp"
 #include "table.hpp"
@@ -41,74 +43,169 @@ rec::Compression compression_named(const std::string& name) {
   throw Failure{{Errc::invalid_argument, "compression '" + name + "' is none of none, lz4, zstd"}};
 }
 
-// One topic being recorded: its reader in the tools' slot, its channel.
+// Set by SIGUSR1: write a snapshot.
+volatile std::sig_atomic_t snapshot_asked = 0;
+
+// One topic being recorded, of either medium: how its samples are read
+// (up to `most` of what is there now, each handed to `write`; whether
+// there was any), and what was written and lost of it.
 struct Recorded {
   std::string topic;
-  Reader<shm::View<shm::Bytes>> reader;
-  std::size_t index;  // the recorder's
-  std::size_t capacity;
-  std::optional<rec::CdrCodec> cdr;  // its samples written as CDR, through `encoded`
-  std::vector<std::byte> encoded;
+  std::size_t index;  // the sink's
+  std::size_t capacity;  // what its ring holds: read once more at the end
+  std::function<bool(Recorded& self, std::size_t most)> read;
   std::uint64_t written = 0;
   std::uint64_t lost = 0;
 };
 
-// Set by SIGUSR1: write a snapshot.
-volatile std::sig_atomic_t snapshot_asked = 0;
+// What every recording shares, whatever the medium: the options checked,
+// the sink (every sample into a file or a series, or with --snapshot the
+// last seconds in memory), the clock, the loop until Ctrl-C, --duration
+// or -n, and the report.
+class Recording {
+ public:
+  Recording(const Options& o, const RecordOptions& r) : o_{o}, r_{r} {
+    if (r.out.empty()) throw Failure{{Errc::invalid_argument, "record: no file given (-o FILE.mcap)"}};
+    if (r.topics.empty() && !r.all) throw Failure{{Errc::invalid_argument, "record: name the topics, or --all"}};
+    if (!r.topics.empty() && r.all) throw Failure{{Errc::invalid_argument, "record: topics named and --all: one or the other"}};
+    if (!r.exclude.empty()) {
+      try {
+        exclude_.emplace(r.exclude, std::regex::extended);
+      } catch (const std::regex_error& e) {
+        throw Failure{{Errc::invalid_argument, "record: --exclude '" + r.exclude + "' is no regular expression: " + e.what()}};
+      }
+    }
+  }
+
+  // Whether topic `name` is one to record.
+  [[nodiscard]] bool wanted(const std::string& name) const {
+    if (r_.all) return !(exclude_ && std::regex_search(name, *exclude_));
+    return std::ranges::find(r_.topics, name) != r_.topics.end();
+  }
+  // Opens the sink: after the domain is found, so a missing one makes no file.
+  void begin() {
+    const rec::RecorderOptions options{
+        .file = {.compression = compression_named(r_.compression), .chunk_size = r_.chunk_size, .profile = ""},
+        .max_size = r_.max_size,
+        .max_duration = static_cast<std::uint64_t>(r_.max_duration * 1e9)};
+    if (r_.snapshot > 0) {
+      auto s = std::make_unique<rec::SnapshotRecorder>(r_.out, options, static_cast<std::uint64_t>(r_.snapshot * 1e9));
+      snapshots_ = s.get();
+      sink_ = std::move(s);
+    } else {
+      sink_ = std::make_unique<rec::Recorder>(r_.out, options);
+    }
+    sink_->add_metadata({rec::kClockMetadata, {{"steady_to_unix_ns", std::to_string(steady_to_unix_)}}});
+  }
+  rec::Sink& sink() { return *sink_; }
+  // A topic to read by `read` (given its index, from add_topic).
+  void add(std::string topic, std::size_t index, std::size_t capacity, std::function<bool(Recorded&, std::size_t)> read) {
+    topics_.push_back(std::make_unique<Recorded>(Recorded{std::move(topic), index, capacity, std::move(read)}));
+  }
+  [[nodiscard]] bool empty() const { return topics_.empty(); }
+  // Whether -n leaves room for another sample.
+  [[nodiscard]] bool more() const { return o_.count == 0 || total_ < o_.count; }
+
+  // One sample of topic `t`, stamped `stamp` (steady_clock, as published),
+  // arriving now.
+  void write(Recorded& t, std::uint32_t sequence, Clock::time_point stamp, std::span<const std::byte> data) {
+    const auto log_time = static_cast<std::uint64_t>(stamp.time_since_epoch().count() + steady_to_unix_);
+    const auto publish_time = static_cast<std::uint64_t>(Clock::now().time_since_epoch().count() + steady_to_unix_);
+    sink_->write(t.index, sequence, log_time, publish_time, data);
+    ++t.written;
+    ++total_;
+  }
+  void lost(Recorded& t, std::uint64_t so_far) {
+    if (so_far != t.lost) sink_->lost(t.index, t.lost = so_far);
+  }
+  // Reads until Ctrl-C, --duration or -n; `look` (every second, with
+  // --all) opens the topics that appeared; `nap` waits when nothing came.
+  int run(const std::function<void()>& look, const std::function<void()>& nap) {
+    if (topics_.empty()) std::cerr << "prime: no topic to record yet; waiting for some (--all)\n";
+    finish_on_ctrl_c();
+    if (snapshots_) {
+      std::signal(SIGUSR1, [](int) { snapshot_asked = 1; });
+      std::cerr << "prime: keeping the last " << r_.snapshot << " s in memory; kill -USR1 " << ::getpid() << " writes them\n";
+    }
+    const auto start = Clock::now();
+    const auto until = o_.duration > 0 ? start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o_.duration))
+                                       : Clock::time_point::max();
+    auto next_look = start + 1s;
+    while (!ctrl_c_pressed() && Clock::now() < until && more()) {
+      bool any = false;
+      for (auto& t : topics_) any = t->read(*t, 256) || any;
+      if (snapshots_ && snapshot_asked) {
+        snapshot_asked = 0;
+        const auto span = static_cast<double>(snapshots_->held_span()) / 1e9;
+        const auto [name, messages] = snapshots_->take();
+        std::cerr << "prime: " << name << ": the last " << fixed(span, 3) << " s, " << messages << " samples\n";
+      }
+      if (r_.all && Clock::now() >= next_look) {
+        look();
+        next_look = Clock::now() + 1s;
+      }
+      if (!any) {
+        sink_->flush();
+        nap();
+      }
+    }
+    // Stopped: what was published by now is recorded too (a ring's worth
+    // at most, so a publisher flat out does not keep it going).
+    for (auto& t : topics_) t->read(*t, t->capacity);
+    sink_->close();
+    for (const auto& t : topics_)
+      std::cerr << "prime: recorded " << t->written << " samples of '" << t->topic << "', lost " << t->lost << '\n';
+    const bool open_ended = o_.duration <= 0 && o_.count == 0;
+    const auto files = sink_->files();
+    if (files.empty()) {
+      std::cerr << "prime: no snapshot was asked for: nothing written\n";
+      return after_ctrl_c(open_ended, int{kOk});
+    }
+    std::cerr << "prime: "
+              << (files.size() == 1 ? files.front() : std::to_string(files.size()) + " files, " + files.front() + " to " + files.back())
+              << ": " << sink_->bytes_written() << " bytes\n";
+    return after_ctrl_c(open_ended, int{kOk});
+  }
+
+ private:
+  const Options& o_;
+  const RecordOptions& r_;
+  std::optional<std::regex> exclude_;
+  // Stamps are steady_clock (one clock for every process of the machine):
+  // written as Unix time, by one offset taken now and kept in the file.
+  const std::int64_t steady_to_unix_ = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                           std::chrono::system_clock::now().time_since_epoch() - Clock::now().time_since_epoch())
+                                           .count();
+  std::unique_ptr<rec::Sink> sink_;
+  rec::SnapshotRecorder* snapshots_ = nullptr;
+  std::vector<std::unique_ptr<Recorded>> topics_;
+  std::uint64_t total_ = 0;
+};
 
 }  // namespace
 
 int shm_record(const Options& o, const RecordOptions& r) {
-  if (r.out.empty()) throw Failure{{Errc::invalid_argument, "record: no file given (-o FILE.mcap)"}};
-  if (r.topics.empty() && !r.all) throw Failure{{Errc::invalid_argument, "record: name the topics, or --all"}};
-  if (!r.topics.empty() && r.all) throw Failure{{Errc::invalid_argument, "record: topics named and --all: one or the other"}};
-  std::optional<std::regex> exclude;
-  if (!r.exclude.empty()) {
-    try {
-      exclude.emplace(r.exclude, std::regex::extended);
-    } catch (const std::regex_error& e) {
-      throw Failure{{Errc::invalid_argument, "record: --exclude '" + r.exclude + "' is no regular expression: " + e.what()}};
-    }
-  }
+  Recording recording{o, r};
   const auto snapshot = snapshot_of(o);
   shm::Core core{o.domain, joining(o, "prime record")};
-  const rec::RecorderOptions options{
-      .file = {.compression = compression_named(r.compression), .chunk_size = r.chunk_size, .profile = ""},
-      .max_size = r.max_size,
-      .max_duration = static_cast<std::uint64_t>(r.max_duration * 1e9)};
-  // Every sample into the file (or a series), or, with --snapshot, the
-  // last seconds in memory, into a file of a series at each SIGUSR1.
-  rec::SnapshotRecorder* snapshots = nullptr;
-  std::unique_ptr<rec::Sink> sink;
-  if (r.snapshot > 0) {
-    auto s = std::make_unique<rec::SnapshotRecorder>(r.out, options, static_cast<std::uint64_t>(r.snapshot * 1e9));
-    snapshots = s.get();
-    sink = std::move(s);
-  } else {
-    sink = std::make_unique<rec::Recorder>(r.out, options);
-  }
-  auto& file = *sink;
-  // Stamps are steady_clock (one clock for every process of the machine):
-  // written as Unix time, by one offset taken now and kept in the file.
-  const auto steady_to_unix = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                  std::chrono::system_clock::now().time_since_epoch() - Clock::now().time_since_epoch())
-                                  .count();
-  file.add_metadata({rec::kClockMetadata, {{"steady_to_unix_ns", std::to_string(steady_to_unix)}}});
-  std::vector<std::unique_ptr<Recorded>> recorded;
+  for (const auto& name : r.topics)
+    if (std::ranges::none_of(snapshot.topics, [&](const auto& t) { return t.name == name; }))
+      throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + o.domain + "'"}};
+  recording.begin();
+  // Each topic's reader in the tools' slot (so no `block` publisher waits
+  // for it), and what turns its views into messages.
+  struct Reading {
+    Reader<shm::View<shm::Bytes>> reader;
+    std::optional<rec::CdrCodec> cdr;  // its samples written as CDR, through `encoded`
+    std::vector<std::byte> encoded;
+  };
+  std::vector<std::unique_ptr<Reading>> readings;
   std::set<std::string> known;
-  // Opens what is to be recorded and is not yet: every topic named must be
-  // there at the start; with --all, topics that appear later join.
-  auto open = [&](const shm::RegistrySnapshot& s, bool at_start) {
-    auto wanted = [&](const std::string& name) {
-      if (r.all) return !(exclude && std::regex_search(name, *exclude));
-      return std::ranges::find(r.topics, name) != r.topics.end();
-    };
-    if (at_start)
-      for (const auto& name : r.topics)
-        if (std::ranges::none_of(s.topics, [&](const auto& t) { return t.name == name; }))
-          throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + o.domain + "'"}};
+  // Opens what is to be recorded and is not yet (with --all, topics that
+  // appear later join).
+  auto open = [&](const shm::RegistrySnapshot& s) {
     for (const auto& t : s.topics) {
-      if (known.contains(t.name) || !wanted(t.name)) continue;
+      if (known.contains(t.name) || !recording.wanted(t.name)) continue;
       known.insert(t.name);
       auto metadata = rec::fingerprint_metadata(t.fingerprint);
       metadata.insert({{rec::kTypeEntry, t.type},
@@ -119,85 +216,84 @@ int shm_record(const Options& o, const RecordOptions& r) {
       // know ROS 2 decode field by field; any other as its bytes, under a
       // schema that names it.
       auto cdr = t.fingerprint == Fingerprint::of<shm::Bytes>() ? std::nullopt : rec::CdrCodec::of(t.schema, t.fingerprint.size);
-      std::size_t topic = 0;
+      std::size_t index = 0;
       if (cdr) {
         metadata[rec::kDescriptionEntry] = t.schema;
         const auto name = rec::ros2_name(read_text(t.fingerprint.name));
-        topic = file.add_topic({0, name, "ros2msg", cdr->definition(name)}, {0, 0, t.name, "cdr", metadata});
+        index = recording.sink().add_topic({0, name, "ros2msg", cdr->definition(name)}, {0, 0, t.name, "cdr", metadata});
       } else {
-        topic = file.add_topic({0, t.type, "prime", t.schema}, {0, 0, t.name, "prime-raw", metadata});
+        index = recording.sink().add_topic({0, t.type, "prime", t.schema}, {0, 0, t.name, "prime-raw", metadata});
       }
-      recorded.push_back(std::make_unique<Recorded>(Recorded{t.name, core.observe(t.name), topic, t.qos.capacity, std::move(cdr), {}}));
+      auto& reading = *readings.emplace_back(std::make_unique<Reading>(Reading{core.observe(t.name), std::move(cdr), {}}));
+      // Its one view at a time (the tools' slot holds one): copied into
+      // the writer's queue, then let go.
+      recording.add(t.name, index, t.qos.capacity, [&recording, &reading](Recorded& t, std::size_t most) {
+        bool any = false;
+        for (std::size_t k = 0; k < most && recording.more(); ++k) {
+          auto sample = reading.reader.try_read();
+          if (!sample) break;
+          const auto bytes = sample->value.bytes();
+          if (reading.cdr) reading.cdr->encode(bytes, reading.encoded);
+          recording.write(t, static_cast<std::uint32_t>(sample->value.sequence()), sample->stamp,
+                          reading.cdr ? std::span<const std::byte>{reading.encoded} : bytes);
+          any = true;
+        }
+        recording.lost(t, reading.reader.lost());
+        return any;
+      });
     }
   };
-  open(snapshot, true);
-  if (recorded.empty()) std::cerr << "prime: no topic to record yet; waiting for some (--all)\n";
+  open(snapshot);
+  return recording.run([&] { open(core.registry()); }, [] { std::this_thread::sleep_for(100us); });
+}
 
-  finish_on_ctrl_c();
-  if (snapshots) {
-    std::signal(SIGUSR1, [](int) { snapshot_asked = 1; });
-    std::cerr << "prime: keeping the last " << r.snapshot << " s in memory; kill -USR1 " << ::getpid() << " writes them\n";
-  }
-  const auto start = Clock::now();
-  const auto until = o.duration > 0 ? start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration))
-                                    : Clock::time_point::max();
-  std::uint64_t total = 0;
-  auto next_look = start + 1s;
-  // What `t` has published and is not yet read, up to `most` samples: its
-  // one view at a time (the tools' slot holds one), copied into the
-  // writer's queue, then let go. Whether there was any.
-  auto read_some = [&](Recorded& t, std::size_t most) {
-    bool any = false;
-    for (std::size_t k = 0; k < most && (o.count == 0 || total < o.count); ++k) {
-      auto sample = t.reader.try_read();
-      if (!sample) break;
-      const auto arrived = Clock::now();
-      const auto log_time = static_cast<std::uint64_t>(sample->stamp.time_since_epoch().count() + steady_to_unix);
-      const auto publish_time = static_cast<std::uint64_t>(arrived.time_since_epoch().count() + steady_to_unix);
-      const auto bytes = sample->value.bytes();
-      if (t.cdr) t.cdr->encode(bytes, t.encoded);
-      file.write(t.index, static_cast<std::uint32_t>(sample->value.sequence()), log_time, publish_time,
-                 t.cdr ? std::span<const std::byte>{t.encoded} : bytes);
-      ++t.written;
-      ++total;
-      any = true;
-    }
-    if (const auto lost = t.reader.lost(); lost != t.lost) file.lost(t.index, t.lost = lost);
-    return any;
+int optimus_record(const Options& o, const RecordOptions& r) {
+  Recording recording{o, r};
+  auto inspector = optimus_inspector(o);
+  const auto sources = inspector.sources();
+  for (const auto& name : r.topics)
+    if (std::ranges::none_of(sources, [&](const auto& s) { return s.name == name; }))
+      throw Failure{{Errc::not_found, "no source '" + name + "' in Optimus domain '" + o.domain + "'"}};
+  recording.begin();
+  // Each source's stream from now on, read through one connection. Its
+  // entries are recorded as Optimus sent them (its 16-byte header, then
+  // the body: the type's bytes or MessagePack): message encoding
+  // "prime-optimus". A gap in the stream's sequence numbers is what was
+  // trimmed from it before the recorder read it: lost.
+  struct Reading {
+    optimus::Inspector::Tail tail;
+    std::optional<std::uint64_t> last;
+    std::uint64_t lost = 0;
   };
-  while (!ctrl_c_pressed() && Clock::now() < until && (o.count == 0 || total < o.count)) {
-    bool any = false;
-    for (auto& t : recorded) any = read_some(*t, 256) || any;
-    if (snapshots && snapshot_asked) {
-      snapshot_asked = 0;
-      const auto span = static_cast<double>(snapshots->held_span()) / 1e9;
-      const auto [name, messages] = snapshots->take();
-      std::cerr << "prime: " << name << ": the last " << fixed(span, 3) << " s, " << messages << " samples\n";
+  std::vector<std::unique_ptr<Reading>> readings;
+  std::set<std::string> known;
+  auto open = [&](const std::vector<optimus::SourceSummary>& all) {
+    for (const auto& s : all) {
+      if (known.contains(s.name) || !recording.wanted(s.name)) continue;
+      known.insert(s.name);
+      const auto index = recording.sink().add_topic(
+          {0, s.type, "", ""}, {0, 0, s.name, "prime-optimus", {{rec::kTypeEntry, s.type}, {"medium", "optimus"}}});
+      auto& reading = *readings.emplace_back(std::make_unique<Reading>(Reading{inspector.tail(s.name), {}, 0}));
+      recording.add(s.name, index, 100, [&recording, &reading](Recorded& t, std::size_t most) {
+        bool any = false;
+        // Waiting a millisecond on a quiet stream: no longer, with others to read.
+        for (std::size_t k = 0; k < most && recording.more(); ++k) {
+          auto entry = reading.tail.next(std::chrono::milliseconds{1});
+          if (!entry) break;
+          const auto sequence = entry->sequence.value_or(0);
+          if (entry->sequence && reading.last && sequence > *reading.last + 1) reading.lost += sequence - *reading.last - 1;
+          if (entry->sequence) reading.last = sequence;
+          const auto data = std::as_bytes(std::span{entry->data.data(), entry->data.size()});
+          recording.write(t, static_cast<std::uint32_t>(sequence), entry->stamp.value_or(Clock::now()), data);
+          any = true;
+        }
+        recording.lost(t, reading.lost);
+        return any;
+      });
     }
-    if (r.all && Clock::now() >= next_look) {
-      open(core.registry(), false);
-      next_look = Clock::now() + 1s;
-    }
-    if (!any) {
-      file.flush();
-      std::this_thread::sleep_for(100us);
-    }
-  }
-  // Stopped: what was published by now is recorded too (a ring's worth at
-  // most, so a publisher flat out does not keep it going).
-  for (auto& t : recorded) read_some(*t, t->capacity);
-  file.close();
-  for (const auto& t : recorded)
-    std::cerr << "prime: recorded " << t->written << " samples of '" << t->topic << "', lost " << t->lost << '\n';
-  const auto files = file.files();
-  if (files.empty()) {
-    std::cerr << "prime: no snapshot was asked for: nothing written\n";
-    return after_ctrl_c(o.duration <= 0 && o.count == 0, int{kOk});
-  }
-  std::cerr << "prime: " << (files.size() == 1 ? files.front() : std::to_string(files.size()) + " files, " + files.front() + " to " + files.back())
-            << ": " << file.bytes_written() << " bytes\n";
-  const bool open_ended = o.duration <= 0 && o.count == 0;
-  return after_ctrl_c(open_ended, int{kOk});
+  };
+  open(sources);
+  return recording.run([&] { open(inspector.sources()); }, [] {});
 }
 
 int record_info(const Options& o, const std::string& path) {

@@ -24,6 +24,8 @@ struct RecordOptions {
 };
 
 int shm_record(const Options& o, const RecordOptions& r);
+// The same, of an Optimus domain's sources (--redis).
+int optimus_record(const Options& o, const RecordOptions& r);
 int record_info(const Options& o, const std::string& file);
 // A recording whose writer died (no summary, a chunk cut short) rewritten
 // whole into `out`: its complete chunks, with an index and a summary.

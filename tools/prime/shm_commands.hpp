@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "prime/logic/sample.hpp"
+#include "prime/optimus/inspect.hpp"
 #include "prime/shm/inspect.hpp"
 #include "prime/shm/qos.hpp"
 
@@ -61,6 +62,9 @@ int shm_call(const Options& o);
 int shm_graph(const Options& o);
 int shm_clean(const Options& o);
 
+// The Optimus domain `o` names, looked at from outside (credentials from
+// PRIME_REDIS_USER and PRIME_REDIS_PASSWORD).
+optimus::Inspector optimus_inspector(const Options& o);
 int optimus_ls(const Options& o);
 int optimus_info(const Options& o);
 int optimus_watch(const Options& o, const std::string& command);  // hz, bw, delay, echo on a source

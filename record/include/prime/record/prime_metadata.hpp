@@ -41,8 +41,9 @@ inline constexpr auto kTypeEntry = "type";
 
 // For a channel recorded in CDR (message encoding "cdr"), the codec that
 // turns its messages back into the type's `size` bytes; nullopt for one
-// recorded as the bytes themselves. Throws Failure (Errc::damaged, naming
-// `file`) for a CDR channel without a usable description.
+// recorded as the bytes themselves ("prime-raw"). Throws Failure naming
+// `file`: Errc::damaged for a CDR channel without a usable description,
+// type_mismatch for another encoding (an Optimus source's messages, say).
 [[nodiscard]] std::optional<CdrCodec> recorded_codec(const Channel& channel, std::size_t size, const std::string& file);
 
 // What a recording's stamps (steady_clock, as published) were shifted by
