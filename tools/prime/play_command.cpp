@@ -79,40 +79,20 @@ bool wait_until(Clock::time_point t) {
 }
 
 
-}  // namespace
-
-int shm_play(const Options& o, const PlayOptions& p) {
-  const auto rate = rate_of(p.rate);
-  const auto remaps = remaps_of(p.remaps);
-  const bool keep_stamps = p.stamps == "keep";
-  rec::MergedReader files{p.files};
-
-  std::set<std::string> named(p.topics.begin(), p.topics.end());
-  std::set<std::string> recorded;
-  for (std::size_t f = 0; f < files.files(); ++f)
-    for (const auto& [id, ch] : files.file(f).summary().channels) recorded.insert(ch.topic);
-  for (const auto& t : named)
-    if (!recorded.contains(t)) throw Failure{{Errc::not_found, "play: no topic '" + t + "' in the recordings given"}};
-  for (const auto& [from, to] : remaps)
-    if (!recorded.contains(from)) throw Failure{{Errc::not_found, "play: --remap of '" + from + "': no such topic in the recordings given"}};
-
-  const auto from = files.start_time() + static_cast<std::uint64_t>(p.start * 1e9);
-  if (p.start > 0 && from > files.end_time())
-    throw Failure{{Errc::invalid_argument, "play: --start " + fixed(p.start, 3) + " s is past the recordings' end (" +
-                                               fixed(static_cast<double>(files.end_time() - files.start_time()) / 1e9, 3) + " s)"}};
-  const auto to = p.duration > 0 ? from + static_cast<std::uint64_t>(p.duration * 1e9) : std::numeric_limits<std::uint64_t>::max();
-  const auto span = std::min(to, files.end_time()) - from;  // of the recording, in ns: one pass
-
-  // A publisher like any other: it sets the domain up if no one has.
-  auto joined = shm::access_of(o.domain) ? joining(o, "prime play") : shm::DomainOptions{.participant = "prime play"};
-  joined.only_if_alive = false;
-  shm::Core core{o.domain, joined};
-  std::map<std::string, std::unique_ptr<Played>> played;      // by the name published
-  std::vector<std::map<std::uint16_t, Played*>> route(files.files());  // per file: channel to topic
-  std::vector<std::int64_t> steady_to_unix(files.files());
+// A publisher for each topic the recordings hold (those `named`, or all),
+// under its remapped name: on a topic made for the recorded type if none
+// is there, refused if one of another type is. Per file, which topic each
+// of its channels plays on.
+struct Topics {
+  std::map<std::string, std::unique_ptr<Played>> played;  // by the name published
+  std::vector<std::map<std::uint16_t, Played*>> route;    // per file: channel to topic
+};
+Topics open_topics(shm::Core& core, const rec::MergedReader& files, const std::set<std::string>& named,
+                   const std::map<std::string, std::string>& remaps) {
+  std::map<std::string, std::unique_ptr<Played>> played;
+  std::vector<std::map<std::uint16_t, Played*>> route(files.files());
   for (std::size_t f = 0; f < files.files(); ++f) {
     const auto& summary = files.file(f).summary();
-    steady_to_unix[f] = rec::steady_to_unix_ns(summary, files.path(f));
     for (const auto& [id, ch] : summary.channels) {
       if (!named.empty() && !named.contains(ch.topic)) continue;
       if (ch.message_encoding != "prime-raw" && ch.message_encoding != "cdr")
@@ -164,6 +144,40 @@ int shm_play(const Options& o, const PlayOptions& p) {
       played.emplace(topic, std::move(entry));
     }
   }
+  return {std::move(played), std::move(route)};
+}
+
+}  // namespace
+
+int shm_play(const Options& o, const PlayOptions& p) {
+  const auto rate = rate_of(p.rate);
+  const auto remaps = remaps_of(p.remaps);
+  const bool keep_stamps = p.stamps == "keep";
+  rec::MergedReader files{p.files};
+
+  std::set<std::string> named(p.topics.begin(), p.topics.end());
+  std::set<std::string> recorded;
+  for (std::size_t f = 0; f < files.files(); ++f)
+    for (const auto& [id, ch] : files.file(f).summary().channels) recorded.insert(ch.topic);
+  for (const auto& t : named)
+    if (!recorded.contains(t)) throw Failure{{Errc::not_found, "play: no topic '" + t + "' in the recordings given"}};
+  for (const auto& [from, to] : remaps)
+    if (!recorded.contains(from)) throw Failure{{Errc::not_found, "play: --remap of '" + from + "': no such topic in the recordings given"}};
+
+  const auto from = files.start_time() + static_cast<std::uint64_t>(p.start * 1e9);
+  if (p.start > 0 && from > files.end_time())
+    throw Failure{{Errc::invalid_argument, "play: --start " + fixed(p.start, 3) + " s is past the recordings' end (" +
+                                               fixed(static_cast<double>(files.end_time() - files.start_time()) / 1e9, 3) + " s)"}};
+  const auto to = p.duration > 0 ? from + static_cast<std::uint64_t>(p.duration * 1e9) : std::numeric_limits<std::uint64_t>::max();
+  const auto span = std::min(to, files.end_time()) - from;  // of the recording, in ns: one pass
+
+  // A publisher like any other: it sets the domain up if no one has.
+  auto joined = shm::access_of(o.domain) ? joining(o, "prime play") : shm::DomainOptions{.participant = "prime play"};
+  joined.only_if_alive = false;
+  shm::Core core{o.domain, joined};
+  auto [played, route] = open_topics(core, files, named, remaps);
+  std::vector<std::int64_t> steady_to_unix(files.files());
+  for (std::size_t f = 0; f < files.files(); ++f) steady_to_unix[f] = rec::steady_to_unix_ns(files.file(f).summary(), files.path(f));
   if (played.empty()) throw Failure{{Errc::not_found, "play: the recordings given hold no topic"}};
 
   finish_on_ctrl_c();
@@ -174,6 +188,7 @@ int shm_play(const Options& o, const PlayOptions& p) {
   do {
     files.seek(from, to, wanted);
     auto m = files.next();
+    if (!m) break;  // nothing in the span asked for: a loop would only spin
     // Timed from the first sample in hand (its chunk read), or later if
     // the pass before ran late.
     pass_start = std::max(pass_start, Clock::now());
