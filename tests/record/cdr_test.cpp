@@ -14,20 +14,12 @@
 #include "prime/common/bounded_vector.hpp"
 #include "prime/common/schema.hpp"
 #include "prime/record/cdr.hpp"
+#include "record/described.hpp"
 
 namespace cdr_test {
 
-struct Point {
-  double x, y, z;
-};
-PRIME_DESCRIBE(Point, x, y, z)
-
-struct Pose {
-  Point position;
-  std::array<double, 4> orientation;
-  std::uint32_t frame;
-};
-PRIME_DESCRIBE(Pose, position, orientation, frame)
+using described::Point;
+using described::Pose;
 
 // Laid out unlike CDR: in memory `in` starts at 8 (its alignment), in CDR
 // at 1, and its `c` at 16 in memory, 8 in CDR.
@@ -103,12 +95,12 @@ TEST(Cdr, DefinitionsNameNestedTypesAsRos2Does) {
   EXPECT_EQ(prime::record::ros2_name("Pose"), "prime/msg/Pose");
   EXPECT_EQ(prime::record::ros2_name("ns::scan_t"), "ns/msg/Scan_t");
   const auto codec = codec_of<Pose>();
-  EXPECT_EQ(codec.definition("cdr_test/msg/Pose"),
-            "cdr_test/PosePosition position\n"
+  EXPECT_EQ(codec.definition("described/msg/Pose"),
+            "described/PosePosition position\n"
             "float64[4] orientation\n"
             "uint32 frame\n"
             "================================================================================\n"
-            "MSG: cdr_test/PosePosition\n"
+            "MSG: described/PosePosition\n"
             "float64 x\nfloat64 y\nfloat64 z\n");
   EXPECT_EQ(codec_of<Named>().definition("cdr_test/msg/Named"),
             "uint32 id\nstring<=16 name\nfloat32[<=4] values\nbool ok\n");

@@ -17,20 +17,12 @@
 #include "prime/record/cdr.hpp"
 #include "prime/record/mcap_writer.hpp"
 #include "prime/record/prime_metadata.hpp"
+#include "record/described.hpp"
 
 namespace samples {
 
-// Laid out as CDR: recorded as its own bytes after the header.
-struct Point {
-  double x, y, z;
-};
-PRIME_DESCRIBE(Point, x, y, z)
-struct Pose {
-  Point position;
-  std::array<double, 4> orientation;
-  std::uint32_t frame;
-};
-PRIME_DESCRIBE(Pose, position, orientation, frame)
+using described::Point;
+using described::Pose;
 
 // Bounded strings and vectors, a byte before a record: encoded field by field.
 struct Reading {

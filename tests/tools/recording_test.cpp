@@ -95,6 +95,15 @@ void record_ticks(const std::string& domain, const std::filesystem::path& file, 
   if (r.code != 0) throw std::runtime_error{"record failed: " + r.out};
 }
 
+// `n` ticks of a 500 Hz publisher in `domain` (started for them) recorded
+// into `file`, as read back.
+std::vector<Recorded> ticks_recorded(const std::string& domain, const std::filesystem::path& file, std::size_t n) {
+  PeerProcess ticks{{"ticks", domain, "tool/ticks", "500", "0"}};
+  if (!ticks.says("publishing")) throw std::runtime_error{"the ticks peer did not start"};
+  record_ticks(domain, file, n);
+  return ticks_in(file);
+}
+
 TEST(PrimeToolRecord, RecordsEveryTickOfAPublisherAndInfoCountsThem) {
   const auto domain = unique_domain("tool-record");
   PeerProcess ticks{{"ticks", domain, "tool/ticks", "500", "0"}};
@@ -415,12 +424,7 @@ TEST(PrimeToolRecord, ASnapshotHoldsTheLastSecondsAndIsWrittenOnASignal) {
 TEST(PrimeToolPlay, PublishesARecordingAtItsTimingWithItsStamps) {
   const auto domain = unique_domain("tool-play");
   const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
-  {
-    PeerProcess ticks{{"ticks", domain, "tool/ticks", "500", "0"}};
-    ASSERT_TRUE(ticks.says("publishing"));
-    record_ticks(domain, file, 200);
-  }
-  const auto recorded = ticks_in(file);
+  const auto recorded = ticks_recorded(domain, file, 200);
   ASSERT_EQ(recorded.size(), 200u);
   const auto span = recorded.back().stamp - recorded.front().stamp;
   shm::Core core{domain};
@@ -518,12 +522,7 @@ TEST(PrimeToolPlay, MergesFilesByTimeAndSeeksByTheIndex) {
 TEST(PrimeToolPlay, MakesTheRecordedTopicForItsTypeAndLoopsUntilCtrlC) {
   const auto recorded_in = unique_domain("tool-play-rec");
   const auto file = std::filesystem::temp_directory_path() / (recorded_in + ".mcap");
-  {
-    PeerProcess ticks{{"ticks", recorded_in, "tool/ticks", "500", "0"}};
-    ASSERT_TRUE(ticks.says("publishing"));
-    record_ticks(recorded_in, file, 50);
-  }
-  const auto recorded = ticks_in(file);
+  const auto recorded = ticks_recorded(recorded_in, file, 50);
   const auto domain = unique_domain("tool-play-new");
   ASSERT_FALSE(shm::access_of(domain));
   auto play = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "play", file, "--loop", "--rate", "4"}, true);

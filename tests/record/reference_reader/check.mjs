@@ -21,7 +21,7 @@ const decompressHandlers = {
 
 // The fields mcap_samples.cpp gave message `i` of each type, by its name.
 const expected = {
-  "samples/msg/Pose": (i) => ({
+  "described/msg/Pose": (i) => ({
     position: { x: i, y: 2 * i, z: -i },
     orientation: [0.5 * i, 0, 0, 1],
     frame: i % 7,
