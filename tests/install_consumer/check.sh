@@ -6,6 +6,8 @@
 #             is loaded, Optimus is not;
 #   media     COMPONENTS shm optimus, everything visible: prime::shm and
 #             prime::optimus link into a program that runs;
+#   recordings  COMPONENTS record: a recording written and played into a
+#             chain through prime::record;
 #   all       no components, everything visible: every component is loaded;
 #   and a component asked for whose dependency is hidden: prime is not found,
 #   with a message that names what is missing.
@@ -33,7 +35,7 @@ consumer() {
   local name=$1
   configure "$@" || fail "$name: configuring" "$work/$name.log"
   cmake --build "$work/$name" >>"$work/$name.log" 2>&1 || fail "$name: building" "$work/$name.log"
-  for program in consumer media_consumer; do
+  for program in consumer media_consumer record_consumer; do
     if [[ -x $work/$name/$program ]]; then
       "$work/$name/$program" || fail "$name: $program returned $?" ""
       echo "$name: $program built and ran"
@@ -69,16 +71,24 @@ for medium in shm optimus; do
   done
   echo "$medium: each installed header compiles on its own"
 done
-for library in libprime_shm.so libprime_shm.a libprime_optimus.so libprime_optimus.a; do
+for header in "$work/prefix/include/prime/record"/*.hpp; do
+  echo "#include \"${header#"$work/prefix/include/"}\"" |
+    "${compiler:-c++}" -std=c++23 -fsyntax-only -I"$work/prefix/include" -x c++ - 2>"$work/header.log" ||
+    fail "the installed ${header#"$work/prefix/include/"} does not compile on its own" "$work/header.log"
+done
+echo "record: each installed header compiles on its own"
+for library in libprime_shm.so libprime_shm.a libprime_optimus.so libprime_optimus.a libprime_record.so libprime_record.a; do
   compgen -G "$work/prefix/lib*/$library" >/dev/null || compgen -G "$work/prefix/lib*/*/$library" >/dev/null ||
     fail "$library is not installed" ""
 done
-echo "libprime_shm and libprime_optimus installed, shared and static"
+echo "libprime_shm, libprime_optimus and libprime_record installed, shared and static"
 consumer core -DPRIME_LOADED=shm "$hide_boost" "$hide_hiredis"
 [[ -x $work/core/media_consumer ]] && fail "core: the media were linked though their dependencies are hidden" ""
 consumer media "-DPRIME_COMPONENTS=shm;optimus" "-DPRIME_LOADED=shm;optimus"
 [[ -x $work/media/media_consumer ]] || fail "media: prime::shm and prime::optimus were not linked" ""
-configure all "-DPRIME_LOADED=shm;optimus" || fail "all: configuring" "$work/all.log"
+consumer recordings "-DPRIME_COMPONENTS=record" "-DPRIME_LOADED=record"
+[[ -x $work/recordings/record_consumer ]] || fail "recordings: prime::record was not linked" ""
+configure all "-DPRIME_LOADED=shm;optimus;record" || fail "all: configuring" "$work/all.log"
 echo "all: every component loaded"
 not_found optimus_without_hiredis "hiredis" -DPRIME_COMPONENTS=optimus "$hide_hiredis"
 echo "find_package(prime) consumers built and ran"
