@@ -14,10 +14,8 @@ namespace {
 
 using K = TypeLayout::Kind;
 
-std::size_t primitive_size(const TypeLayout& t) {
-  if (t.kind == K::boolean || t.kind == K::character) return 1;
-  return t.number.size() == 2 ? 1 : t.number.ends_with("16") ? 2 : t.number.ends_with("32") ? 4 : 8;
-}
+// A number's, boolean's or character's size: what it reaches (extent).
+std::size_t primitive_size(const TypeLayout& t) { return extent(t); }
 bool primitive(const TypeLayout& t) { return t.kind == K::number || t.kind == K::boolean || t.kind == K::character; }
 std::size_t align(std::size_t at, std::size_t to) { return (at + to - 1) / to * to; }
 

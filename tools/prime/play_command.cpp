@@ -177,7 +177,12 @@ int shm_play(const Options& o, const PlayOptions& p) {
   shm::Core core{o.domain, joined};
   auto [played, route] = open_topics(core, files, named, remaps);
   std::vector<std::int64_t> steady_to_unix(files.files());
-  for (std::size_t f = 0; f < files.files(); ++f) steady_to_unix[f] = rec::steady_to_unix_ns(files.file(f).summary(), files.path(f));
+  std::vector<std::set<std::uint16_t>> cdr_channels(files.files());  // per file: the channels recorded in CDR
+  for (std::size_t f = 0; f < files.files(); ++f) {
+    steady_to_unix[f] = rec::steady_to_unix_ns(files.file(f).summary(), files.path(f));
+    for (const auto& [id, ch] : files.file(f).summary().channels)
+      if (ch.message_encoding == "cdr") cdr_channels[f].insert(id);
+  }
   if (played.empty()) throw Failure{{Errc::not_found, "play: the recordings given hold no topic"}};
 
   finish_on_ctrl_c();
@@ -194,7 +199,7 @@ int shm_play(const Options& o, const PlayOptions& p) {
     pass_start = std::max(pass_start, Clock::now());
     for (; m; m = files.next()) {
       auto& t = *route[m->file].at(m->message.channel_id);
-      if (t.cdr && files.file(m->file).summary().channels.at(m->message.channel_id).message_encoding == "cdr")
+      if (t.cdr && cdr_channels[m->file].contains(m->message.channel_id))
         m->message.data = t.cdr->decode(m->message.data, "recording '" + files.path(m->file) + "': a sample of '" + t.topic + "'");
       const auto& data = m->message.data;
       if (t.size && data.size() != *t.size)
