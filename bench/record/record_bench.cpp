@@ -10,8 +10,9 @@
 //                                  a publisher at <hz> on a ring <capacity> deep:
 //                                  recorded, lost (none is the bar), missing (must be 0)
 //   BM_PublishPacedAlone/64/100000/64
-//                                  the paced publisher with no recorder: publish_ns
-//                                  (BM_RecordPaced's beside it: what the recorder costs it)
+//                                  the paced publisher with no recorder: publish_ns (mean)
+//                                  and publish_p50_ns (BM_RecordPaced's beside them: what
+//                                  the recorder costs it)
 //   BM_WriteFloor                  write() of 1 MiB blocks into the same folder on the
 //                                  recorder's CPUs: written_bytes_per_s, its floor
 //   BM_PlayTiming                  prime play of 2 s at 1 kHz, read by a busy
@@ -221,14 +222,15 @@ void BM_PublisherAlone(benchmark::State& state) {
 struct Paced {
   std::uint64_t count;
   double rate;
-  double publish_ns;
+  double publish_ns;      // the mean
+  double publish_p50_ns;  // the median: what a preempted publish or two leave alone
 };
 template <class T>
 Paced publish_paced(shm::Publisher<T>& publisher, double hz) {
   pin_this_thread_as_publisher();
   const auto period = std::chrono::duration<double>(1.0 / hz);
   const auto count = static_cast<std::uint64_t>(hz * seconds_per_run());
-  Clock::duration publishing{};
+  std::vector<Clock::duration> took(count);
   const auto start = Clock::now();
   for (std::uint64_t i = 0; i < count; ++i) {
     const auto due = start + std::chrono::duration_cast<Clock::duration>(period * static_cast<double>(i));
@@ -239,12 +241,15 @@ Paced publish_paced(shm::Publisher<T>& publisher, double hz) {
     if (!loan) throw std::runtime_error{loan.error().message};
     (*loan)->seq = i;
     std::move(*loan).publish();
-    publishing += Clock::now() - before;
+    took[i] = Clock::now() - before;
   }
-  const auto took = std::chrono::duration<double>(Clock::now() - start).count();
+  const auto seconds = std::chrono::duration<double>(Clock::now() - start).count();
   unpin_this_thread();
-  return {count, static_cast<double>(count) / took,
-          std::chrono::duration<double, std::nano>(publishing).count() / static_cast<double>(count)};
+  Clock::duration publishing{};
+  for (const auto t : took) publishing += t;
+  std::ranges::nth_element(took, took.begin() + static_cast<std::ptrdiff_t>(count / 2));
+  auto ns = [](Clock::duration d) { return std::chrono::duration<double, std::nano>(d).count(); };
+  return {count, static_cast<double>(count) / seconds, ns(publishing) / static_cast<double>(count), ns(took[count / 2])};
 }
 
 // The same publisher with no recorder: what a loan and publish take alone.
@@ -256,6 +261,7 @@ void BM_PublishPacedAlone(benchmark::State& state) {
     const auto p = publish_paced(publisher, static_cast<double>(state.range(0)));
     state.counters["published_per_s"] = p.rate;
     state.counters["publish_ns"] = p.publish_ns;
+    state.counters["publish_p50_ns"] = p.publish_p50_ns;
   }
 }
 
@@ -271,12 +277,13 @@ void BM_RecordPaced(benchmark::State& state) {
   TmpfsFile file{"paced"};
   for (auto _ : state) {
     Recorder recorder{core, domain, "bench/paced", file.path};
-    const auto [count, rate, publish_ns] = publish_paced(publisher, hz);
+    const auto [count, rate, publish_ns, publish_p50_ns] = publish_paced(publisher, hz);
     recorder.stop();
     const auto r = recorded_in(file.path, "bench/paced");
     const auto after_first = count - r.first;
     state.counters["published_per_s"] = rate;
     state.counters["publish_ns"] = publish_ns;
+    state.counters["publish_p50_ns"] = publish_p50_ns;
     state.counters["published_from_first"] = static_cast<double>(after_first);
     state.counters["recorded"] = static_cast<double>(r.messages);
     state.counters["lost"] = static_cast<double>(r.lost);

@@ -46,8 +46,8 @@ void Recorder::add_metadata(const Metadata& metadata) {
 void Recorder::lost(std::size_t topic, std::uint64_t so_far) { push({true, topic, so_far, 0, 0, 0, {}}); }
 
 void Recorder::write(std::size_t topic, std::uint32_t sequence, std::uint64_t log_time, std::uint64_t publish_time,
-                     std::span<const std::byte> data) {
-  push({false, topic, 0, sequence, log_time, publish_time, {data.begin(), data.end()}});
+                     std::vector<std::byte> data) {
+  push({false, topic, 0, sequence, log_time, publish_time, std::move(data)});
 }
 
 namespace {

@@ -28,10 +28,10 @@ void SnapshotRecorder::lost(std::size_t topic, std::uint64_t so_far) {
 }
 
 void SnapshotRecorder::write(std::size_t topic, std::uint32_t sequence, std::uint64_t log_time, std::uint64_t publish_time,
-                             std::span<const std::byte> data) {
+                             std::vector<std::byte> data) {
   newest_ = std::max(newest_, publish_time);
   bytes_ += data.size();
-  held_.push_back({false, topic, 0, sequence, log_time, publish_time, {data.begin(), data.end()}});
+  held_.push_back({false, topic, 0, sequence, log_time, publish_time, std::move(data)});
   trim();
 }
 

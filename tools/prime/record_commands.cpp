@@ -108,10 +108,10 @@ class Recording {
 
   // One sample of topic `t`, stamped `stamp` (steady_clock, as published),
   // arriving now.
-  void write(Recorded& t, std::uint32_t sequence, Clock::time_point stamp, std::span<const std::byte> data) {
+  void write(Recorded& t, std::uint32_t sequence, Clock::time_point stamp, std::vector<std::byte> data) {
     const auto log_time = static_cast<std::uint64_t>(stamp.time_since_epoch().count() + steady_to_unix_);
     const auto publish_time = static_cast<std::uint64_t>(Clock::now().time_since_epoch().count() + steady_to_unix_);
-    sink_->write(t.index, sequence, log_time, publish_time, data);
+    sink_->write(t.index, sequence, log_time, publish_time, std::move(data));
     ++t.written;
     ++total_;
   }
@@ -196,8 +196,7 @@ int shm_record(const Options& o, const RecordOptions& r) {
   // for it), and what turns its views into messages.
   struct Reading {
     Reader<shm::View<shm::Bytes>> reader;
-    std::optional<rec::CdrCodec> cdr;  // its samples written as CDR, through `encoded`
-    std::vector<std::byte> encoded;
+    std::optional<rec::CdrCodec> cdr;  // its samples written as CDR
   };
   std::vector<std::unique_ptr<Reading>> readings;
   std::set<std::string> known;
@@ -224,18 +223,21 @@ int shm_record(const Options& o, const RecordOptions& r) {
       } else {
         index = recording.sink().add_topic({0, t.type, "prime", t.schema}, {0, 0, t.name, "prime-raw", metadata});
       }
-      auto& reading = *readings.emplace_back(std::make_unique<Reading>(Reading{core.observe(t.name), std::move(cdr), {}}));
-      // Its one view at a time (the tools' slot holds one): copied into
-      // the writer's queue, then let go.
+      auto& reading = *readings.emplace_back(std::make_unique<Reading>(Reading{core.observe(t.name), std::move(cdr)}));
+      // Its one view at a time (the tools' slot holds one): copied (or
+      // encoded) into a message for the writer's queue, then let go.
       recording.add(t.name, index, t.qos.capacity, [&recording, &reading](Recorded& t, std::size_t most) {
         bool any = false;
         for (std::size_t k = 0; k < most && recording.more(); ++k) {
           auto sample = reading.reader.try_read();
           if (!sample) break;
           const auto bytes = sample->value.bytes();
-          if (reading.cdr) reading.cdr->encode(bytes, reading.encoded);
-          recording.write(t, static_cast<std::uint32_t>(sample->value.sequence()), sample->stamp,
-                          reading.cdr ? std::span<const std::byte>{reading.encoded} : bytes);
+          std::vector<std::byte> message;
+          if (reading.cdr)
+            reading.cdr->encode(bytes, message);
+          else
+            message.assign(bytes.begin(), bytes.end());
+          recording.write(t, static_cast<std::uint32_t>(sample->value.sequence()), sample->stamp, std::move(message));
           any = true;
         }
         recording.lost(t, reading.reader.lost());
@@ -284,7 +286,7 @@ int optimus_record(const Options& o, const RecordOptions& r) {
           if (entry->sequence && reading.last && sequence > *reading.last + 1) reading.lost += sequence - *reading.last - 1;
           if (entry->sequence) reading.last = sequence;
           const auto data = std::as_bytes(std::span{entry->data.data(), entry->data.size()});
-          recording.write(t, static_cast<std::uint32_t>(sequence), entry->stamp.value_or(Clock::now()), data);
+          recording.write(t, static_cast<std::uint32_t>(sequence), entry->stamp.value_or(Clock::now()), {data.begin(), data.end()});
           any = true;
         }
         recording.lost(t, reading.lost);

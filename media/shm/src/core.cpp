@@ -61,6 +61,14 @@ std::string describe(const TopicQos& q) {
          std::to_string(q.max_subscribers) + ", max_held " + std::to_string(q.max_held);
 }
 
+// Topic `name` as it is, for the tools' handles; Errc::not_found when the
+// domain has none.
+std::shared_ptr<Topic> existing_topic(const std::shared_ptr<Registry>& registry, const std::string& name) {
+  auto topic = Topic::inspect(registry, name);
+  if (!topic) throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + registry->domain() + "'"}};
+  return topic;
+}
+
 std::string program_name() {
   std::ifstream comm{"/proc/self/comm"};
   std::string name;
@@ -93,16 +101,12 @@ RegistrySnapshot Core::registry() { return detail::snapshot(registry_); }
 std::size_t Core::reclaim() { return detail::reclaim(registry_); }
 
 Reader<View<Bytes>> Core::observe(const std::string& name) {
-  auto topic = detail::Topic::inspect(registry_, name);
-  if (!topic) throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + domain() + "'"}};
   return Reader<View<Bytes>>{std::make_unique<SubscriptionReader<Bytes>>(
-      std::move(topic), SubscribeQos{.spin = std::chrono::microseconds{0}}, runtime(), true)};
+      detail::existing_topic(registry_, name), SubscribeQos{.spin = std::chrono::microseconds{0}}, runtime(), true)};
 }
 
 Publisher<Bytes> Core::raw_publisher(const std::string& name) {
-  auto topic = detail::Topic::inspect(registry_, name);
-  if (!topic) throw Failure{{Errc::not_found, "no topic '" + name + "' in shm domain '" + domain() + "'"}};
-  return Publisher<Bytes>{std::move(topic), std::chrono::milliseconds{1000}, PublishFence::full, {}};
+  return Publisher<Bytes>{detail::existing_topic(registry_, name), std::chrono::milliseconds{1000}, PublishFence::full, {}};
 }
 
 Publisher<Bytes> Core::raw_publisher(const std::string& name, const Fingerprint& type, const std::string& schema,

@@ -28,8 +28,11 @@ class Sink {
   virtual void add_metadata(const Metadata& metadata) = 0;
   // How many samples of `topic` were lost before they were read, so far.
   virtual void lost(std::size_t topic, std::uint64_t so_far) = 0;
+  // A message of `topic`. Its bytes are taken over: a reader that copied
+  // them into a vector of its own moves it in, and they are not copied
+  // again.
   virtual void write(std::size_t topic, std::uint32_t sequence, std::uint64_t log_time, std::uint64_t publish_time,
-                     std::span<const std::byte> data) = 0;
+                     std::vector<std::byte> data) = 0;
   // Nothing more to read for a while: a moment to hand over what is collected.
   virtual void flush() = 0;
   // Writes what there is to write, and closes. Once.
@@ -81,7 +84,7 @@ class Recorder final : public Sink {
   // Queues a message (collected here, handed to the writer a batch at a
   // time); waits while `max_queued` bytes are queued.
   void write(std::size_t topic, std::uint32_t sequence, std::uint64_t log_time, std::uint64_t publish_time,
-             std::span<const std::byte> data) override;
+             std::vector<std::byte> data) override;
   // Hands what is collected to the writer now: for the reading side to
   // call when it has nothing more to read for a while.
   void flush() override;

@@ -29,7 +29,7 @@ class SnapshotRecorder final : public Sink {
   void add_metadata(const Metadata& metadata) override;
   void lost(std::size_t topic, std::uint64_t so_far) override;
   void write(std::size_t topic, std::uint32_t sequence, std::uint64_t log_time, std::uint64_t publish_time,
-             std::span<const std::byte> data) override;
+             std::vector<std::byte> data) override;
   void flush() override {}
   void close() override;
   [[nodiscard]] std::vector<std::string> files() const override { return files_; }
