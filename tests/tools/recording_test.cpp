@@ -167,6 +167,31 @@ TEST(PrimeToolRecord, RecordsEveryTickOfAPublisherAndInfoCountsThem) {
   std::filesystem::remove(file);
 }
 
+// A recorder kept from its CPU while its topic's ring is overwritten
+// (stopped, here) records what the ring still holds, counts the rest as
+// lost, and says why: how long the ring lasts, and a capacity that lasts.
+TEST(PrimeToolRecord, ARecorderThatLosesSamplesSaysHowLongItsRingLasts) {
+  const auto domain = unique_domain("tool-record-lost");
+  shm::Core core{domain};
+  auto publisher = core.publisher<Tick>("tool/short", {.capacity = 8});
+  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
+  auto recorder = PeerProcess::command({PRIME_TOOL_PATH, "--domain", domain, "record", "tool/short", "-o", file}, true);
+  ASSERT_TRUE(recorder.line_starting("prime: recording 1 topic into " + file.string(), 10s));
+  ::kill(recorder.pid(), SIGSTOP);
+  for (std::uint64_t n = 0; n < 100; ++n) ASSERT_TRUE(publisher.publish(Tick{n, 0, {}}));
+  ::kill(recorder.pid(), SIGCONT);
+  ::kill(recorder.pid(), SIGINT);
+  const auto out = recorder.all_output();
+  ASSERT_EQ(recorder.exit_code(10s), 0) << out;
+  EXPECT_NE(out.find("recorded 8 samples of 'tool/short', lost 92"), std::string::npos) << out;
+  EXPECT_NE(out.find("'tool/short' lost samples its ring overwrote before they were read: it holds 8, "), std::string::npos) << out;
+  EXPECT_NE(out.find("a topic capacity of "), std::string::npos) << out;
+  const auto recorded = ticks_in(file);
+  ASSERT_EQ(recorded.size(), 8u);
+  for (std::size_t i = 0; i < recorded.size(); ++i) EXPECT_EQ(recorded[i].n, 92 + i) << "the newest eight, in order";
+  std::filesystem::remove(file);
+}
+
 // A recorder killed with -9 leaves a file that is read and played up to
 // its last complete chunk, says it was cut short, and is recovered whole.
 TEST(PrimeToolRecord, ARecorderKilledMidFileLeavesAFileThatIsReadPlayedAndRecovered) {

@@ -52,7 +52,8 @@ volatile std::sig_atomic_t snapshot_asked = 0;
 struct Recorded {
   std::string topic;
   std::size_t index;  // the sink's
-  std::size_t capacity;  // what its ring holds: read once more at the end
+  std::size_t capacity;  // what its ring holds (or what is read at most): read once more at the end
+  bool ring;             // a shared-memory topic: a loss is a sample its ring overwrote before it was read
   std::function<bool(Recorded& self, std::size_t most)> read;
   std::uint64_t written = 0;
   std::uint64_t lost = 0;
@@ -99,8 +100,8 @@ class Recording {
   }
   rec::Sink& sink() { return *sink_; }
   // A topic to read by `read` (given its index, from add_topic).
-  void add(std::string topic, std::size_t index, std::size_t capacity, std::function<bool(Recorded&, std::size_t)> read) {
-    topics_.push_back(std::make_unique<Recorded>(Recorded{std::move(topic), index, capacity, std::move(read)}));
+  void add(std::string topic, std::size_t index, std::size_t capacity, bool ring, std::function<bool(Recorded&, std::size_t)> read) {
+    topics_.push_back(std::make_unique<Recorded>(Recorded{std::move(topic), index, capacity, ring, std::move(read)}));
   }
   [[nodiscard]] bool empty() const { return topics_.empty(); }
   // Whether -n leaves room for another sample.
@@ -121,7 +122,11 @@ class Recording {
   // Reads until Ctrl-C, --duration or -n; `look` (every second, with
   // --all) opens the topics that appeared; `nap` waits when nothing came.
   int run(const std::function<void()>& look, const std::function<void()>& nap) {
-    if (topics_.empty()) std::cerr << "prime: no topic to record yet; waiting for some (--all)\n";
+    if (topics_.empty())
+      std::cerr << "prime: no topic to record yet; waiting for some (--all)\n";
+    else
+      std::cerr << "prime: recording " << topics_.size() << (topics_.size() == 1 ? " topic" : " topics") << " into " << r_.out
+                << "; Ctrl-C ends it\n";
     finish_on_ctrl_c();
     if (snapshots_) {
       std::signal(SIGUSR1, [](int) { snapshot_asked = 1; });
@@ -153,8 +158,11 @@ class Recording {
     // at most, so a publisher flat out does not keep it going).
     for (auto& t : topics_) t->read(*t, t->capacity);
     sink_->close();
-    for (const auto& t : topics_)
+    const auto seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    for (const auto& t : topics_) {
       std::cerr << "prime: recorded " << t->written << " samples of '" << t->topic << "', lost " << t->lost << '\n';
+      if (t->ring && t->lost > 0) std::cerr << "prime: " << why_lost(*t, seconds) << '\n';
+    }
     const bool open_ended = o_.duration <= 0 && o_.count == 0;
     const auto files = sink_->files();
     if (files.empty()) {
@@ -168,6 +176,20 @@ class Recording {
   }
 
  private:
+  // What a ring's losses say: the time its ring lasts at the topic's mean
+  // rate, against how long a reader may be kept from its CPU
+  // (docs/performance.md, "Recording"), and a capacity that lasts 10 ms.
+  static std::string why_lost(const Recorded& t, double seconds) {
+    const auto rate = static_cast<double>(t.written + t.lost) / std::max(seconds, 1e-3);
+    const auto lasts_ms = static_cast<double>(t.capacity) / rate * 1e3;
+    std::size_t enough = 2;
+    while (static_cast<double>(enough) < rate / 100 || enough <= t.capacity) enough *= 2;
+    return "'" + t.topic + "' lost samples its ring overwrote before they were read: it holds " + std::to_string(t.capacity) +
+           ", " + fixed(lasts_ms, 2) + " ms at its mean rate of " + fixed(rate, 0) + " Hz, and a reader is " +
+           "sometimes kept from its CPU longer than that; a topic capacity of " + std::to_string(enough) +
+           " gives it 10 ms or more";
+  }
+
   const Options& o_;
   const RecordOptions& r_;
   std::optional<std::regex> exclude_;
@@ -226,7 +248,7 @@ int shm_record(const Options& o, const RecordOptions& r) {
       auto& reading = *readings.emplace_back(std::make_unique<Reading>(Reading{core.observe(t.name), std::move(cdr)}));
       // Its one view at a time (the tools' slot holds one): copied (or
       // encoded) into a message for the writer's queue, then let go.
-      recording.add(t.name, index, t.qos.capacity, [&recording, &reading](Recorded& t, std::size_t most) {
+      recording.add(t.name, index, t.qos.capacity, true, [&recording, &reading](Recorded& t, std::size_t most) {
         bool any = false;
         for (std::size_t k = 0; k < most && recording.more(); ++k) {
           auto sample = reading.reader.try_read();
@@ -276,7 +298,7 @@ int optimus_record(const Options& o, const RecordOptions& r) {
       const auto index = recording.sink().add_topic(
           {0, s.type, "", ""}, {0, 0, s.name, "prime-optimus", {{rec::kTypeEntry, s.type}, {"medium", "optimus"}}});
       auto& reading = *readings.emplace_back(std::make_unique<Reading>(Reading{inspector.tail(s.name), {}, 0}));
-      recording.add(s.name, index, 100, [&recording, &reading](Recorded& t, std::size_t most) {
+      recording.add(s.name, index, 100, false, [&recording, &reading](Recorded& t, std::size_t most) {
         bool any = false;
         // Waiting a millisecond on a quiet stream: no longer, with others to read.
         for (std::size_t k = 0; k < most && recording.more(); ++k) {
