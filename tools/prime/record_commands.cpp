@@ -124,7 +124,7 @@ class Recording {
   int run(const std::function<void()>& look, const std::function<void()>& nap) {
     if (topics_.empty())
       std::cerr << "prime: no topic to record yet; waiting for some (--all)\n";
-    else
+    else if (!snapshots_)
       std::cerr << "prime: recording " << topics_.size() << (topics_.size() == 1 ? " topic" : " topics") << " into " << r_.out
                 << "; Ctrl-C ends it\n";
     finish_on_ctrl_c();
