@@ -122,12 +122,13 @@ class Recording {
   // Reads until Ctrl-C, --duration or -n; `look` (every second, with
   // --all) opens the topics that appeared; `nap` waits when nothing came.
   int run(const std::function<void()>& look, const std::function<void()>& nap) {
+    // Said once Ctrl-C is caught: from then on it ends the recording whole.
+    finish_on_ctrl_c();
     if (topics_.empty())
       std::cerr << "prime: no topic to record yet; waiting for some (--all)\n";
     else if (!snapshots_)
       std::cerr << "prime: recording " << topics_.size() << (topics_.size() == 1 ? " topic" : " topics") << " into " << r_.out
                 << "; Ctrl-C ends it\n";
-    finish_on_ctrl_c();
     if (snapshots_) {
       std::signal(SIGUSR1, [](int) { snapshot_asked = 1; });
       std::cerr << "prime: keeping the last " << r_.snapshot << " s in memory; kill -USR1 " << ::getpid() << " writes them\n";
