@@ -6,6 +6,11 @@
 //                                  recorded_per_s, recorded_bytes_per_s, lost,
 //                                  published_per_s
 //   BM_PublisherAlone/<bytes>      the same publisher with no recorder: published_per_s
+//   BM_PublisherBesideReader/<bytes>
+//                                  the same publisher beside a plain subscriber reading
+//                                  busily on the recorder's CPUs (in this process):
+//                                  published_per_s, read_per_s; what any reader of
+//                                  every sample costs it, against what the recorder does
 //   BM_RecordPaced/<bytes>/<hz>/<capacity>
 //                                  a publisher at <hz> on a ring <capacity> deep:
 //                                  recorded, lost (none is the bar), missing (must be 0)
@@ -216,6 +221,31 @@ void BM_PublisherAlone(benchmark::State& state) {
   }
 }
 
+template <std::size_t N>
+void BM_PublisherBesideReader(benchmark::State& state) {
+  shm::Core core{new_name("beside")};
+  auto publisher = core.publisher<Blob<N>>("bench/flat");
+  auto reader = core.subscribe<Blob<N>>("bench/flat").subscribe();
+  for (auto _ : state) {
+    std::atomic<bool> done{false};
+    std::uint64_t read = 0;
+    std::thread reading{[&] {
+      const auto set = cpus(false);
+      ::sched_setaffinity(0, sizeof set, &set);
+      while (!done.load(std::memory_order_relaxed))
+        if (auto s = reader.try_read()) read += s->value->seq != ~std::uint64_t{0} ? 1 : 0;
+    }};
+    pin_this_thread_as_publisher();
+    const auto start = Clock::now();
+    state.counters["published_per_s"] = publish_flat_out(publisher, seconds_per_run());
+    const auto took = std::chrono::duration<double>(Clock::now() - start).count();
+    unpin_this_thread();
+    done = true;
+    reading.join();
+    state.counters["read_per_s"] = static_cast<double>(read) / took;
+  }
+}
+
 // Publishes at `hz` for the run's seconds, each sample at its time (the
 // clock read between), on the publisher's CPU: how many, at what rate,
 // and the mean time a loan and publish took.
@@ -369,6 +399,7 @@ BENCHMARK(BM_RecordFlat<64>)->Name("BM_RecordFlat/64")->Iterations(1)->UseRealTi
 BENCHMARK(BM_RecordFlat<1 << 20>)->Name("BM_RecordFlat/1048576")->Iterations(1)->UseRealTime();
 BENCHMARK(BM_PublisherAlone<64>)->Name("BM_PublisherAlone/64")->Iterations(1)->UseRealTime();
 BENCHMARK(BM_PublisherAlone<1 << 20>)->Name("BM_PublisherAlone/1048576")->Iterations(1)->UseRealTime();
+BENCHMARK(BM_PublisherBesideReader<64>)->Name("BM_PublisherBesideReader/64")->Iterations(1)->UseRealTime();
 BENCHMARK(BM_RecordPaced<64>)->Name("BM_RecordPaced/64")->Args({100'000, 64})->Args({100'000, 1024})->Iterations(1)->UseRealTime();
 BENCHMARK(BM_PublishPacedAlone<64>)->Name("BM_PublishPacedAlone/64")->Args({100'000, 64})->Iterations(1)->UseRealTime();
 BENCHMARK(BM_RecordPaced<1 << 20>)->Name("BM_RecordPaced/1048576")->Args({1'000, 64})->Iterations(1)->UseRealTime();

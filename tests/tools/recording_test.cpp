@@ -16,7 +16,9 @@
 
 #include "optimus/support/redis_server.hpp"
 #include "prime/optimus.hpp"
+#include "prime/optimus/inspect.hpp"
 #include "prime/record/mcap_reader.hpp"
+#include "prime/record/mcap_writer.hpp"
 #include "prime/record/prime_metadata.hpp"
 #include "prime/shm.hpp"
 #include "shm/domain.hpp"
@@ -353,6 +355,101 @@ TEST(PrimeToolRecord, RecordsAnOptimusSourceAsItsMessages) {
   EXPECT_EQ(play.code, 2) << play.out;
   EXPECT_NE(play.out.find("recorded from Optimus"), std::string::npos) << play.out;
   std::filesystem::remove(file);
+}
+
+// An Optimus recording played with --redis: onto a source registered with
+// the recorded type, every message in order with its recorded stamp
+// (--stamps keep), read by a typed reader; a shared-memory recording, or a
+// message that is not one of the type's, is refused by name.
+TEST(PrimeToolPlay, PlaysAnOptimusRecordingIntoOptimus) {
+  RedisServer server;
+  const auto domain = unique_domain("tool-play-optimus");
+  const auto file = std::filesystem::temp_directory_path() / (domain + ".mcap");
+  optimus::Core core{optimus::Options{.url = server.url(), .domain = domain}};
+  {
+    auto ticks = core.publisher<int>("ticks");
+    auto recorder = PeerProcess::command(
+        {PRIME_TOOL_PATH, "--domain", domain, "--redis", server.url(), "record", "ticks", "-o", file.string(), "-n", "40"}, true);
+    ASSERT_TRUE(recorder.line_starting("prime: recording 1 topic", 10s));
+    for (int n = 0; n < 40; ++n) ASSERT_TRUE(ticks.publish(1000 + n));
+    const auto out = recorder.all_output();
+    ASSERT_EQ(recorder.exit_code(10s), 0) << out;
+  }
+  // What was recorded: each value with its stamp as published.
+  std::vector<std::pair<int, Clock::time_point>> recorded;
+  {
+    record::McapReader reader{file};
+    const auto offset = record::steady_to_unix_ns(reader.summary(), file);
+    reader.for_each_message([&](const record::Message& m) {
+      const auto v = optimus::decode_message<int>(std::string_view{reinterpret_cast<const char*>(m.data.data()), m.data.size()}, "ticks");
+      ASSERT_TRUE(v) << v.error().message;
+      recorded.emplace_back(*v, Clock::time_point{std::chrono::nanoseconds{static_cast<std::int64_t>(m.log_time) - offset}});
+    });
+  }
+  ASSERT_EQ(recorded.size(), 40u);
+
+  auto reader = core.subscribe<int>("replayed", {.capacity = 100}).subscribe();
+  const auto play = prime(domain, {"--redis", server.url(), "play", file, "--rate", "max", "--remap", "ticks:=replayed", "--stamps", "keep"});
+  ASSERT_EQ(play.code, 0) << play.out;
+  EXPECT_NE(play.out.find("played 40 samples on 'replayed'"), std::string::npos) << play.out;
+  for (const auto& [value, stamp] : recorded) {
+    auto s = reader.read_for(10s);
+    ASSERT_TRUE(s) << "played value " << value;
+    EXPECT_EQ(s->value, value);
+    EXPECT_EQ(s->stamp, stamp) << "its stamp as recorded";
+  }
+  EXPECT_FALSE(reader.try_read()) << "nothing more";
+
+  // A source of another type is refused by the registry, by name.
+  auto other = core.publisher<double>("doubles");
+  const auto clash = prime(domain, {"--redis", server.url(), "play", file, "--remap", "ticks:=doubles"});
+  EXPECT_EQ(clash.code, 1) << clash.out;
+  EXPECT_NE(clash.out.find("doubles"), std::string::npos) << clash.out;
+
+  // A recording of shared-memory topics is for shared memory.
+  const auto shm_file = std::filesystem::temp_directory_path() / (domain + "-shm.mcap");
+  ticks_recorded(unique_domain("tool-play-optimus-shm"), shm_file, 5);
+  const auto wrong_medium = prime(domain, {"--redis", server.url(), "play", shm_file});
+  EXPECT_EQ(wrong_medium.code, 2) << wrong_medium.out;
+  EXPECT_NE(wrong_medium.out.find("recorded from shared memory: play it without --redis"), std::string::npos) << wrong_medium.out;
+
+  // A message that is not one of the recorded type's (a damaged or forged
+  // file) is refused before it is appended.
+  const auto forged = std::filesystem::temp_directory_path() / (domain + "-forged.mcap");
+  {
+    record::McapWriter w{forged, {.compression = record::Compression::none, .chunk_size = 1 << 20, .profile = ""}};
+    // The type as the registry keeps it, from the source recorded.
+    const auto sources = optimus::Inspector{optimus::Options{.url = server.url(), .domain = domain}}.sources();
+    const auto ticks = std::ranges::find(sources, "ticks", &optimus::SourceSummary::name);
+    ASSERT_NE(ticks, sources.end());
+    EXPECT_TRUE(ticks->record.ends_with(" " + Fingerprint::of<int>().describe())) << ticks->record;
+    const auto channel = w.add_channel(w.add_schema("int", "", ""), "ticks", "prime-optimus",
+                                       {{record::kOptimusTypeEntry, ticks->record}, {record::kTypeEntry, Fingerprint::of<int>().describe()}});
+    const std::string junk = "not a message";
+    w.write(channel, 0, 1, 1, std::as_bytes(std::span{junk.data(), junk.size()}));
+  }
+  auto forged_reader = core.subscribe<int>("forged", {.capacity = 10}).subscribe();
+  const auto refused = prime(domain, {"--redis", server.url(), "play", forged, "--remap", "ticks:=forged"});
+  EXPECT_NE(refused.code, 0) << refused.out;
+  EXPECT_NE(refused.out.find("source 'forged': not one of its messages"), std::string::npos) << refused.out;
+  EXPECT_FALSE(forged_reader.read_for(100ms)) << "nothing appended";
+  // A type record that is not the recorded type's never reaches the registry.
+  const auto misnamed = std::filesystem::temp_directory_path() / (domain + "-misnamed.mcap");
+  {
+    record::McapWriter w{misnamed, {.compression = record::Compression::none, .chunk_size = 1 << 20, .profile = ""}};
+    const auto channel = w.add_channel(w.add_schema("int", "", ""), "ticks", "prime-optimus",
+                                       {{record::kOptimusTypeEntry, "0123456789abcdef float64"},
+                                        {record::kTypeEntry, Fingerprint::of<int>().describe()}});
+    const int one = 1;
+    w.write(channel, 0, 1, 1, std::as_bytes(std::span{&one, 1}));
+  }
+  const auto misnamed_play = prime(domain, {"--redis", server.url(), "play", misnamed, "--remap", "ticks:=misnamed"});
+  EXPECT_EQ(misnamed_play.code, 1) << misnamed_play.out;
+  EXPECT_NE(misnamed_play.out.find("the Optimus type record of 'ticks' is \"0123456789abcdef float64\", not"), std::string::npos)
+      << misnamed_play.out;
+  const auto after = optimus::Inspector{optimus::Options{.url = server.url(), .domain = domain}}.sources();
+  EXPECT_EQ(std::ranges::count(after, "misnamed", &optimus::SourceSummary::name), 0) << "nothing registered";
+  for (const auto& f : {file, shm_file, forged, misnamed}) std::filesystem::remove(f);
 }
 
 // Split by size: a series of files that, played as one timeline, hold

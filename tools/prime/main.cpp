@@ -188,7 +188,7 @@ int main(int argc, char** argv) {
   });
   PlayOptions play_options;
   auto* play = command("play", "publish recordings into the domain at their recorded timing, as one timeline",
-                       [&] { return shm_play(o, play_options); });
+                       [&] { return shm_play(o, play_options); }, [&] { return optimus_play(o, play_options); });
   play->add_option("files", play_options.files, "the MCAP files")->required();
   play->add_option("--rate", play_options.rate, "times the recorded speed (default 1), or max: as fast as the readers take them");
   play->add_flag("--loop", play_options.loop, "again from the start, until Ctrl-C");

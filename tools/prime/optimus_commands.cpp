@@ -26,17 +26,19 @@ using prime::optimus::Inspector;
 
 }  // namespace
 
-// An inspector of the domain on the server of --redis. Credentials come in
-// the URL (tcp://user:password@host:port), or, kept off the command line
-// (where `ps` shows them), from PRIME_REDIS_USER and PRIME_REDIS_PASSWORD.
-Inspector optimus_inspector(const Options& o) {
+// The domain on the server of --redis. Credentials come in the URL
+// (tcp://user:password@host:port), or, kept off the command line (where
+// `ps` shows them), from PRIME_REDIS_USER and PRIME_REDIS_PASSWORD.
+prime::optimus::Options optimus_options(const Options& o) {
   prime::optimus::Options options{.url = o.redis, .domain = o.domain};
   if (const char* password = std::getenv("PRIME_REDIS_PASSWORD"); password && *password) {
     options.password = password;
     if (const char* user = std::getenv("PRIME_REDIS_USER"); user && *user) options.username = user;
   }
-  return Inspector{std::move(options)};
+  return options;
 }
+
+Inspector optimus_inspector(const Options& o) { return Inspector{optimus_options(o)}; }
 
 namespace {
 

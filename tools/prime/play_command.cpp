@@ -5,17 +5,24 @@
 
 #include <sys/prctl.h>
 
+#include <algorithm>
 #include <charconv>
 #include <chrono>
+#include <expected>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
+#include <span>
 #include <thread>
 
+#include "prime/optimus.hpp"
 #include "prime/record/merged_reader.hpp"
 #include "prime/record/prime_metadata.hpp"
 #include "prime/shm.hpp"
+#include "json.hpp"
 #include "stats.hpp"
 
 namespace prime::tool {
@@ -28,11 +35,23 @@ namespace rec = prime::record;
 // One topic published: every file's channel of it leads here.
 struct Played {
   std::string topic;
-  std::string type;                 // as recorded: a Fingerprint's describe()
-  std::optional<std::size_t> size;  // a typed topic's sample size; none for bytes
-  shm::Publisher<shm::Bytes> publisher;
+  std::string type;                  // as recorded: a Fingerprint's describe()
+  std::optional<std::size_t> size;   // a typed Shm topic's sample size; none for bytes and Optimus messages
   std::optional<rec::CdrCodec> cdr;  // of its channels recorded in CDR (the type's, in every file)
+  // Publishes a sample's bytes (a Shm topic's, or an Optimus message,
+  // header and body) with its stamp.
+  std::move_only_function<std::expected<void, Error>(std::span<const std::byte>, Clock::time_point)> publish;
   std::uint64_t sent = 0;
+};
+
+// Where the recordings play (a shared-memory domain, or an Optimus one):
+// why a channel is not one it plays (none when it is), and its topic made
+// for a channel (the first that plays on it) under the name it is
+// published as.
+struct PlayTarget {
+  std::function<std::optional<std::string>(const rec::Channel&)> refuses;
+  std::function<std::unique_ptr<Played>(const std::string& topic, const rec::Summary&, const rec::Channel&, const std::string& file)>
+      open;
 };
 
 // --rate: a factor of the recorded speed; 0 for "max".
@@ -80,14 +99,13 @@ bool wait_until(Clock::time_point t) {
 
 
 // A publisher for each topic the recordings hold (those `named`, or all),
-// under its remapped name: on a topic made for the recorded type if none
-// is there, refused if one of another type is. Per file, which topic each
+// under its remapped name, made by the target. Per file, which topic each
 // of its channels plays on.
 struct Topics {
   std::map<std::string, std::unique_ptr<Played>> played;  // by the name published
   std::vector<std::map<std::uint16_t, Played*>> route;    // per file: channel to topic
 };
-Topics open_topics(shm::Core& core, const rec::MergedReader& files, const std::set<std::string>& named,
+Topics open_topics(const PlayTarget& target, const rec::MergedReader& files, const std::set<std::string>& named,
                    const std::map<std::string, std::string>& remaps) {
   std::map<std::string, std::unique_ptr<Played>> played;
   std::vector<std::map<std::uint16_t, Played*>> route(files.files());
@@ -95,11 +113,9 @@ Topics open_topics(shm::Core& core, const rec::MergedReader& files, const std::s
     const auto& summary = files.file(f).summary();
     for (const auto& [id, ch] : summary.channels) {
       if (!named.empty() && !named.contains(ch.topic)) continue;
-      if (ch.message_encoding != "prime-raw" && ch.message_encoding != "cdr")
+      if (const auto why = target.refuses(ch))
         throw Failure{{Errc::invalid_argument, "play: topic '" + ch.topic + "' of '" + files.path(f) + "' is in message encoding '" +
-                                                   ch.message_encoding + "' (" +
-                                                   (ch.message_encoding == "prime-optimus" ? "recorded from Optimus" : "not Prime's") +
-                                                   "): play publishes recordings of shared-memory topics; --topics leaves it out"}};
+                                                   ch.message_encoding + "' (" + *why + "); --topics leaves it out"}};
       const auto remapped = remaps.find(ch.topic);
       const auto topic = remapped == remaps.end() ? ch.topic : remapped->second;
       const auto type = rec::recorded_type(summary, ch);
@@ -111,35 +127,7 @@ Topics open_topics(shm::Core& core, const rec::MergedReader& files, const std::s
         route[f][id] = it->second.get();
         continue;
       }
-      const auto fingerprint = rec::recorded_fingerprint(summary, ch, files.path(f));
-      std::optional<shm::Publisher<shm::Bytes>> publisher;
-      if (fingerprint) {
-        const shm::TopicQos qos{.capacity = qos_entry(ch, "capacity", 64),
-                           .max_message_size = qos_entry(ch, "max_message_size", fingerprint->size),
-                           .overflow = ch.metadata.contains("overflow") && ch.metadata.at("overflow") == "block"
-                                           ? Overflow::block
-                                           : Overflow::drop_oldest};
-        const auto description = ch.metadata.find(rec::kDescriptionEntry);
-        const auto schema = summary.schemas.find(ch.schema_id);
-        const auto text = description != ch.metadata.end()                          ? description->second
-                          : schema != summary.schemas.end() && schema->second.encoding == "prime" ? schema->second.data
-                                                                                    : std::string{};
-        publisher.emplace(core.raw_publisher(topic, *fingerprint, text, qos));
-      } else {
-        // Recorded without its fingerprint: only onto a topic its readers opened, of the type recorded.
-        const auto snapshot = core.registry();
-        const auto live = std::ranges::find(snapshot.topics, topic, &shm::RegistrySnapshot::Topic::name);
-        if (live == snapshot.topics.end())
-          throw Failure{{Errc::not_found, "play: '" + files.path(f) + "' holds no fingerprint of the type of '" + ch.topic +
-                                              "': start a reader of '" + topic + "' first, so that the topic exists"}};
-        if (live->type != type)
-          throw Failure{{Errc::type_mismatch, "play: topic '" + topic + "' carries " + live->type + ", recorded as " + type}};
-        publisher.emplace(core.raw_publisher(topic));
-      }
-      const bool bytes = fingerprint && *fingerprint == Fingerprint::of<shm::Bytes>();
-      const auto size = fingerprint && !bytes ? std::optional{fingerprint->size} : std::nullopt;
-      auto entry = std::make_unique<Played>(Played{topic, type, size, std::move(*publisher),
-                                                   size ? rec::recorded_codec(ch, *size, files.path(f)) : std::nullopt});
+      auto entry = target.open(topic, summary, ch, files.path(f));
       route[f][id] = entry.get();
       played.emplace(topic, std::move(entry));
     }
@@ -147,9 +135,86 @@ Topics open_topics(shm::Core& core, const rec::MergedReader& files, const std::s
   return {std::move(played), std::move(route)};
 }
 
-}  // namespace
+// Shared memory plays what was recorded from it: each topic made for the
+// recorded type if none is there, refused if one of another type is.
+PlayTarget shm_target(shm::Core& core) {
+  auto refuses = [](const rec::Channel& ch) -> std::optional<std::string> {
+    if (ch.message_encoding == "prime-raw" || ch.message_encoding == "cdr") return std::nullopt;
+    return ch.message_encoding == "prime-optimus" ? "recorded from Optimus: play it with --redis" : "not Prime's";
+  };
+  auto open = [&core](const std::string& topic, const rec::Summary& summary, const rec::Channel& ch, const std::string& file) {
+    const auto type = rec::recorded_type(summary, ch);
+    const auto fingerprint = rec::recorded_fingerprint(summary, ch, file);
+    std::optional<shm::Publisher<shm::Bytes>> publisher;
+    if (fingerprint) {
+      const shm::TopicQos qos{.capacity = qos_entry(ch, "capacity", 64),
+                              .max_message_size = qos_entry(ch, "max_message_size", fingerprint->size),
+                              .overflow = ch.metadata.contains("overflow") && ch.metadata.at("overflow") == "block"
+                                              ? Overflow::block
+                                              : Overflow::drop_oldest};
+      const auto description = ch.metadata.find(rec::kDescriptionEntry);
+      const auto schema = summary.schemas.find(ch.schema_id);
+      const auto text = description != ch.metadata.end()                                          ? description->second
+                        : schema != summary.schemas.end() && schema->second.encoding == "prime" ? schema->second.data
+                                                                                                  : std::string{};
+      publisher.emplace(core.raw_publisher(topic, *fingerprint, text, qos));
+    } else {
+      // Recorded without its fingerprint: only onto a topic its readers opened, of the type recorded.
+      const auto snapshot = core.registry();
+      const auto live = std::ranges::find(snapshot.topics, topic, &shm::RegistrySnapshot::Topic::name);
+      if (live == snapshot.topics.end())
+        throw Failure{{Errc::not_found, "play: '" + file + "' holds no fingerprint of the type of '" + ch.topic +
+                                            "': start a reader of '" + topic + "' first, so that the topic exists"}};
+      if (live->type != type)
+        throw Failure{{Errc::type_mismatch, "play: topic '" + topic + "' carries " + live->type + ", recorded as " + type}};
+      publisher.emplace(core.raw_publisher(topic));
+    }
+    const bool bytes = fingerprint && *fingerprint == Fingerprint::of<shm::Bytes>();
+    const auto size = fingerprint && !bytes ? std::optional{fingerprint->size} : std::nullopt;
+    // On a `block` topic whose readers are behind, a publish waits for
+    // them (the timing slips rather than a sample being lost).
+    return std::make_unique<Played>(Played{topic, type, size, size ? rec::recorded_codec(ch, *size, file) : std::nullopt,
+                                           [p = std::move(*publisher)](std::span<const std::byte> data, Clock::time_point stamp) mutable {
+                                             return p.publish(data, stamp);
+                                           }});
+  };
+  return {refuses, open};
+}
 
-int shm_play(const Options& o, const PlayOptions& p) {
+// Optimus plays what was recorded from it: each message as the recorder
+// read it from the source's stream (header and body), checked against
+// the source's type, onto a source registered with the recorded type.
+PlayTarget optimus_target(optimus::Core& core) {
+  auto refuses = [](const rec::Channel& ch) -> std::optional<std::string> {
+    if (ch.message_encoding == "prime-optimus") return std::nullopt;
+    return ch.message_encoding == "prime-raw" || ch.message_encoding == "cdr" ? "recorded from shared memory: play it without --redis"
+                                                                              : "not Prime's";
+  };
+  auto open = [&core](const std::string& topic, const rec::Summary& summary, const rec::Channel& ch, const std::string& file) {
+    // The type as the registry keeps it, from the file: checked before it
+    // goes into the registry, where it would lock out the real type's
+    // endpoints if it were forged.
+    const auto type = rec::recorded_type(summary, ch);
+    const auto record = ch.metadata.find(rec::kOptimusTypeEntry);
+    if (record == ch.metadata.end())
+      throw Failure{{Errc::damaged, "play: '" + file + "' keeps no Optimus type record for '" + ch.topic + "' (its channel's '" +
+                                        rec::kOptimusTypeEntry + "' entry: recorded by an older prime?)"}};
+    const auto& r = record->second;  // "<hash> <description>": Core::raw_publisher checks the hash
+    if (r.size() < 18 || r[16] != ' ' || r.substr(17) != type)
+      throw Failure{{Errc::damaged, "play: '" + file + "': the Optimus type record of '" + ch.topic + "' is " + quote(r) +
+                                        ", not a fingerprint hash and the recorded type " + quote(type)}};
+    return std::make_unique<Played>(
+        Played{topic, type, std::nullopt, std::nullopt,
+               [p = core.raw_publisher(topic, r)](std::span<const std::byte> data, Clock::time_point stamp) {
+                 return p.publish({reinterpret_cast<const char*>(data.data()), data.size()}, stamp);
+               }});
+  };
+  return {refuses, open};
+}
+
+// The recordings of `p`, checked, then played into the target that `join`
+// joins.
+int play(const PlayOptions& p, const std::function<PlayTarget()>& join) {
   const auto rate = rate_of(p.rate);
   const auto remaps = remaps_of(p.remaps);
   const bool keep_stamps = p.stamps == "keep";
@@ -171,11 +236,7 @@ int shm_play(const Options& o, const PlayOptions& p) {
   const auto to = p.duration > 0 ? from + static_cast<std::uint64_t>(p.duration * 1e9) : std::numeric_limits<std::uint64_t>::max();
   const auto span = std::min(to, files.end_time()) - from;  // of the recording, in ns: one pass
 
-  // A publisher like any other: it sets the domain up if no one has.
-  auto joined = shm::access_of(o.domain) ? joining(o, "prime play") : shm::DomainOptions{.participant = "prime play"};
-  joined.only_if_alive = false;
-  shm::Core core{o.domain, joined};
-  auto [played, route] = open_topics(core, files, named, remaps);
+  auto [played, route] = open_topics(join(), files, named, remaps);
   std::vector<std::int64_t> steady_to_unix(files.files());
   std::vector<std::set<std::uint16_t>> cdr_channels(files.files());  // per file: the channels recorded in CDR
   for (std::size_t f = 0; f < files.files(); ++f) {
@@ -210,9 +271,8 @@ int shm_play(const Options& o, const PlayOptions& p) {
       const auto stamp = keep_stamps ? Clock::time_point{std::chrono::nanoseconds{static_cast<std::int64_t>(m->message.log_time) -
                                                                                  steady_to_unix[m->file]}}
                                      : Clock::now();
-      // On a `block` topic whose readers are behind, this waits for them
-      // (the timing slips rather than a sample being lost).
-      if (auto sent = t.publisher.publish(data, stamp); !sent) throw Failure{sent.error()};
+      if (auto sent = t.publish(data, stamp); !sent)
+        throw Failure{{sent.error().code, "play: recording '" + files.path(m->file) + "': " + sent.error().message}};
       ++t.sent;
     }
     if (rate > 0) pass_start += std::chrono::duration_cast<Clock::duration>(std::chrono::nanoseconds{span} / rate);
@@ -226,6 +286,23 @@ int shm_play(const Options& o, const PlayOptions& p) {
   }
   std::cerr << "prime: played " << total << " samples in " << fixed(took, 3) << " s\n";
   return after_ctrl_c(p.loop, int{kOk});
+}
+
+}  // namespace
+
+int shm_play(const Options& o, const PlayOptions& p) {
+  std::optional<shm::Core> core;
+  return play(p, [&] {
+    // A publisher like any other: it sets the domain up if no one has.
+    auto joined = shm::access_of(o.domain) ? joining(o, "prime play") : shm::DomainOptions{.participant = "prime play"};
+    joined.only_if_alive = false;
+    return shm_target(core.emplace(o.domain, joined));
+  });
+}
+
+int optimus_play(const Options& o, const PlayOptions& p) {
+  std::optional<optimus::Core> core;
+  return play(p, [&] { return optimus_target(core.emplace(optimus_options(o))); });
 }
 
 }  // namespace prime::tool

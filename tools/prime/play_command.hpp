@@ -1,7 +1,8 @@
 #pragma once
 
-// `prime play`: recordings published into a shared-memory domain, at
-// their recorded timing or faster, as one timeline.
+// `prime play`: recordings published into a domain (shared memory, or
+// Optimus with --redis), at their recorded timing or faster, as one
+// timeline.
 
 #include <string>
 #include <vector>
@@ -21,6 +22,7 @@ struct PlayOptions {
   std::string stamps = "now";       // the samples' stamps: "now" (when published) or "keep" (as recorded)
 };
 
-int shm_play(const Options& o, const PlayOptions& p);
+int shm_play(const Options& o, const PlayOptions& p);      // recordings of shared-memory topics
+int optimus_play(const Options& o, const PlayOptions& p);  // recordings of Optimus sources (--redis)
 
 }  // namespace prime::tool

@@ -297,7 +297,7 @@ int optimus_record(const Options& o, const RecordOptions& r) {
       if (known.contains(s.name) || !recording.wanted(s.name)) continue;
       known.insert(s.name);
       const auto index = recording.sink().add_topic(
-          {0, s.type, "", ""}, {0, 0, s.name, "prime-optimus", {{rec::kTypeEntry, s.type}, {"medium", "optimus"}}});
+          {0, s.type, "", ""}, {0, 0, s.name, "prime-optimus", {{rec::kTypeEntry, s.type}, {rec::kOptimusTypeEntry, s.record}, {"medium", "optimus"}}});
       auto& reading = *readings.emplace_back(std::make_unique<Reading>(Reading{inspector.tail(s.name), {}, 0}));
       recording.add(s.name, index, 100, false, [&recording, &reading](Recorded& t, std::size_t most) {
         bool any = false;

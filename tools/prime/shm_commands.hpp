@@ -62,8 +62,10 @@ int shm_call(const Options& o);
 int shm_graph(const Options& o);
 int shm_clean(const Options& o);
 
-// The Optimus domain `o` names, looked at from outside (credentials from
-// PRIME_REDIS_USER and PRIME_REDIS_PASSWORD).
+// The Optimus domain `o` names: its server and credentials (from the URL,
+// or PRIME_REDIS_USER and PRIME_REDIS_PASSWORD)...
+optimus::Options optimus_options(const Options& o);
+// ...and looked at from outside.
 optimus::Inspector optimus_inspector(const Options& o);
 int optimus_ls(const Options& o);
 int optimus_info(const Options& o);

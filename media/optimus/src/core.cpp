@@ -2,7 +2,10 @@
 // registry, streams and the workers of the services it hosts.
 #include "prime/optimus/core.hpp"
 
+#include <algorithm>
+#include <charconv>
 #include <cstdio>
+#include <string_view>
 
 #include "prime/optimus/detail/keys.hpp"
 #include "prime/optimus/detail/pool.hpp"
@@ -46,10 +49,26 @@ void Core::register_service(const std::string& name, const std::string& record, 
 }
 
 detail::Stream Core::open_stream(const std::string& name, const Qos& qos, const Fingerprint& type, bool write) {
+  return open_stream(name, qos, detail::type_record(type), write);
+}
+
+detail::Stream Core::open_stream(const std::string& name, const Qos& qos, const std::string& record, bool write) {
   auto state = std::make_shared<detail::StreamState>(pool_, name, qos, runtime());
-  detail::register_types(*pool_, detail::sources_key(pool_->domain()), name, detail::type_record(type),
-                         "source '" + name + "'", write);
+  detail::register_types(*pool_, detail::sources_key(pool_->domain()), name, record, "source '" + name + "'", write);
   return detail::Stream{std::move(state)};
+}
+
+RawPublisher Core::raw_publisher(const std::string& name, const std::string& record, Qos qos) {
+  // A record begins with the type's fingerprint hash, as type_record
+  // writes it: 16 lowercase hex digits, then a space.
+  const auto hex = std::string_view{record}.substr(0, 16);
+  std::uint64_t hash = 0;
+  const bool lower = std::ranges::all_of(hex, [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
+  if (record.size() < 18 || record[16] != ' ' || !lower ||
+      std::from_chars(hex.data(), hex.data() + hex.size(), hash, 16).ec != std::errc{})
+    throw Failure{{Errc::invalid_argument, "source '" + name + "': not a type as the registry records one (a 16-digit hash, then its "
+                                           "description)"}};
+  return RawPublisher{open_stream(name, qos, record, true), hash};
 }
 
 std::string Core::private_name() { return "~" + pool_->process_id() + "/" + std::to_string(pool_->next_id()); }

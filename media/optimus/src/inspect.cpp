@@ -71,7 +71,7 @@ std::vector<SourceSummary> Inspector::sources() {
   for (auto& [name, record] : hash(*connection_, options_, detail::sources_key(options_.domain))) {
     auto stream = detail::stream_key(options_.domain, name);
     const auto length = command(*connection_, options_, {"XLEN", stream})->integer();
-    out.push_back({name, described(record), std::move(stream), length, readers(*connection_, options_, name)});
+    out.push_back({name, described(record), std::move(stream), length, readers(*connection_, options_, name), record});
   }
   return out;
 }
@@ -86,7 +86,16 @@ std::vector<ServiceSummary> Inspector::services() {
 }
 
 Inspector::Tail Inspector::tail(const std::string& source) {
-  return Tail{*this, detail::stream_key(options_.domain, source)};
+  // From the stream's newest entry as it is now, by its id: "$" would be
+  // looked up again by each read, and an entry appended between two reads
+  // (or before the first) would never be seen.
+  auto stream = detail::stream_key(options_.domain, source);
+  auto newest = command(*connection_, options_, {"XREVRANGE", stream, "+", "-", "COUNT", "1"});
+  std::string from = "0-0";
+  if (newest->is_array() && newest->size() > 0 && (*newest)[0].is_array() && (*newest)[0].size() > 0 &&
+      (*newest)[0][0].is_string() && detail::entry_id((*newest)[0][0].text()))
+    from = std::string{(*newest)[0][0].text()};
+  return Tail{*this, std::move(stream), std::move(from)};
 }
 
 std::optional<StreamEntry> Inspector::Tail::next(Clock::duration timeout) {

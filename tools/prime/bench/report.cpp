@@ -330,7 +330,11 @@ std::string recording_table(const Results& r) {
                                  " of write() into the same folder alone"
                            : std::string{})
         << "); the publisher " << (with ? rate_text(*with) : "–") << ", " << ratio_text(divide(with, alone))
-        << " its rate alone |\n";
+        << " its rate alone";
+    // What any reader of every sample costs it: a plain subscriber on the same CPU instead.
+    if (const auto read = figure("Shm", "publish-flat-read", payload, "rate"))
+      out << " (beside a plain subscriber instead, " << ratio_text(divide(read, alone)) << ")";
+    out << " |\n";
   }
   for (const auto& [payload, paced, what] :
        {std::tuple{kib, std::string{"100000-64"}, "64 B at 100 kHz, a ring 64 deep"},
@@ -344,6 +348,11 @@ std::string recording_table(const Results& r) {
         << count(figure("ShmRecorder", scenario, payload, "missing")) << " unaccounted; a publish "
         << (with ? time_text(*with) : "–");
     if (alone) out << " (" << time_text(*alone) << " with no recorder: " << ratio_text(divide(alone, with)) << ")";
+    const auto with_p50 = figure("Shm", "publish-paced-recorded-" + paced, payload, "publish-p50");
+    const auto alone_p50 = figure("Shm", "publish-paced-alone-" + paced, payload, "publish-p50");
+    if (with_p50 && alone_p50)
+      out << "; median " << time_text(*with_p50) << " against " << time_text(*alone_p50) << " ("
+          << ratio_text(divide(alone_p50, with_p50)) << ")";
     out << " |\n";
   }
   const auto p50 = figure("ShmPlay", "play-timing", 0, "p50"), p99 = figure("ShmPlay", "play-timing", 0, "p99"),

@@ -196,7 +196,7 @@ void read_loop(const Json& run, Results& out) {
   }
 }
 
-// prime_record_bench: BM_WriteFloor, BM_RecordFlat/<bytes>, BM_PublisherAlone/<bytes>,
+// prime_record_bench: BM_WriteFloor, BM_RecordFlat/<bytes>, BM_PublisherAlone/<bytes>, BM_PublisherBesideReader/<bytes>,
 // BM_RecordPaced/<bytes>/<hz>/<capacity>, BM_PublishPacedAlone/<bytes>/<hz>/<capacity>,
 // BM_PlayTiming (record_bench.cpp says what each counts).
 void read_record(const Json& run, Results& out) {
@@ -217,13 +217,17 @@ void read_record(const Json& run, Results& out) {
     add("Shm", "publish-flat-recorded", "published_per_s", "rate", "msgs/s");
   } else if (kind == "PublisherAlone") {
     add("Shm", "publish-flat-alone", "published_per_s", "rate", "msgs/s");
+  } else if (kind == "PublisherBesideReader") {
+    add("Shm", "publish-flat-read", "published_per_s", "rate", "msgs/s");
   } else if (kind == "RecordPaced") {
     add("ShmRecorder", "record-paced-" + paced, "recorded", "recorded", "msgs");
     add("ShmRecorder", "record-paced-" + paced, "lost", "lost", "msgs");
     add("ShmRecorder", "record-paced-" + paced, "missing", "missing", "msgs");
     add("Shm", "publish-paced-recorded-" + paced, "publish_ns", "publish", "ns");
+    add("Shm", "publish-paced-recorded-" + paced, "publish_p50_ns", "publish-p50", "ns");
   } else if (kind == "PublishPacedAlone") {
     add("Shm", "publish-paced-alone-" + paced, "publish_ns", "publish", "ns");
+    add("Shm", "publish-paced-alone-" + paced, "publish_p50_ns", "publish-p50", "ns");
   } else if (kind == "PlayTiming") {
     add("ShmPlay", "play-timing", "timing_error_p50_ns", "p50", "ns");
     add("ShmPlay", "play-timing", "timing_error_p99_ns", "p99", "ns");

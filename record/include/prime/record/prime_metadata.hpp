@@ -31,6 +31,10 @@ inline constexpr auto kLossesMetadata = "prime.losses";  // per topic: samples o
 // A channel's metadata entry with the type's description (schema_of's
 // text), for a channel whose schema is its ros2msg definition instead.
 inline constexpr auto kDescriptionEntry = "prime_description";
+// A channel recorded from Optimus: its entry with the type as Optimus's
+// registry keeps it ("<hash> <description>"), for `prime play --redis` to
+// register the source with.
+inline constexpr auto kOptimusTypeEntry = "optimus_type";
 // Its entry with the type's Fingerprint::describe().
 inline constexpr auto kTypeEntry = "type";
 

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <exception>
 #include <expected>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <type_traits>
@@ -189,6 +190,27 @@ inline std::uint64_t get_le(std::string_view in, std::size_t at, int bytes) {
   return value;
 }
 
+// What is wrong with `message`'s header for a message of the type whose
+// fingerprint hash is `hash` (its format byte is the caller's to check),
+// as "found ..." says it; none when nothing is.
+inline std::optional<std::string> header_problem(std::string_view message, std::uint64_t hash) {
+  if (message.size() < kHeaderSize)
+    return "only " + std::to_string(message.size()) + " bytes, less than a message header";
+  if (message[0] != 'P' || message[1] != 'O') return "data that is not a Prime message (no 'PO' header)";
+  if (static_cast<std::uint8_t>(message[2]) != kVersion)
+    return "a message of header version " + std::to_string(static_cast<unsigned char>(message[2]));
+  const auto body_size = get_le(message, 4, 4);
+  if (body_size != message.size() - kHeaderSize)
+    return "a header promising " + std::to_string(body_size) + " body bytes where " +
+           std::to_string(message.size() - kHeaderSize) + " are present";
+  if (const auto found = get_le(message, 8, 8); found != hash) {
+    char hex[24];
+    std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(found));
+    return std::string{"a message of another type (fingerprint "} + hex + ")";
+  }
+  return std::nullopt;
+}
+
 }  // namespace detail
 
 // `value` as a message: header, then the codec's body.
@@ -223,21 +245,7 @@ template <Encodable T>
     return std::unexpected(Error{Errc::type_mismatch, std::string{where} + ": expected a message of " +
                                                           fingerprint.describe() + ", found " + what});
   };
-  if (message.size() < detail::kHeaderSize)
-    return fail("only " + std::to_string(message.size()) + " bytes, less than a message header");
-  if (message[0] != 'P' || message[1] != 'O') return fail("data that is not a Prime message (no 'PO' header)");
-  if (static_cast<std::uint8_t>(message[2]) != detail::kVersion)
-    return fail("a message of header version " + std::to_string(static_cast<unsigned char>(message[2])));
-  const auto body_size = detail::get_le(message, 4, 4);
-  if (body_size != message.size() - detail::kHeaderSize)
-    return fail("a header promising " + std::to_string(body_size) + " body bytes where " +
-                std::to_string(message.size() - detail::kHeaderSize) + " are present");
-  const auto hash = detail::get_le(message, 8, 8);
-  if (hash != fingerprint.hash) {
-    char hex[24];
-    std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
-    return fail(std::string{"a message of another type (fingerprint "} + hex + ")");
-  }
+  if (auto problem = detail::header_problem(message, fingerprint.hash)) return fail(*problem);
   if (static_cast<std::uint8_t>(message[3]) != detail::format_byte<T>())
     return fail("a body in another format or byte order (format byte " +
                 std::to_string(static_cast<unsigned char>(message[3])) + ")");

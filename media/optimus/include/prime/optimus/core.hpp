@@ -20,6 +20,7 @@
 #include "prime/optimus/chain.hpp"
 #include "prime/optimus/codec.hpp"
 #include "prime/optimus/options.hpp"
+#include "prime/optimus/raw_publisher.hpp"
 #include "prime/optimus/source.hpp"
 #include "prime/optimus/stream.hpp"
 #include "prime/topology/chain_factory.hpp"
@@ -144,6 +145,14 @@ class Core : public Runtime, public ChainFactory<Core> {
     return Source<T>{std::move(stream), Graph::node(std::move(name), "source", "optimus")};
   }
 
+  // For tools (prime play): the writing end of the named source, of the
+  // type registered as `record` ("<hash> <description>", as the registry
+  // and Inspector::sources() give it), for messages that come encoded
+  // (RawPublisher). Throws Errc::invalid_argument when `record` does not
+  // start with a fingerprint hash, and Errc::type_mismatch when the
+  // registry records the source with another type.
+  [[nodiscard]] RawPublisher raw_publisher(const std::string& name, const std::string& record, Qos qos = {});
+
   [[nodiscard]] const Options& options() const noexcept { return options_; }
   // The server's URL, with the password it may carry as "***".
   [[nodiscard]] const std::string& url() const noexcept;
@@ -172,6 +181,8 @@ class Core : public Runtime, public ChainFactory<Core> {
   void register_service(const std::string& name, const std::string& record, bool write);
   // The stream of the source `name`, its type recorded (or checked) in the registry.
   detail::Stream open_stream(const std::string& name, const Qos& qos, const Fingerprint& type, bool write);
+  // The same for a type as the registry records it.
+  detail::Stream open_stream(const std::string& name, const Qos& qos, const std::string& record, bool write);
   // A name for a chain's own service, unique in the domain.
   std::string private_name();
   // A chain's route to the service `name`, shown as `shown` in messages.

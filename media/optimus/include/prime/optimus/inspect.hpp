@@ -28,6 +28,7 @@ struct SourceSummary {
   std::string stream;         // the stream's key
   long long length = 0;       // entries in the stream now
   long long readers = 0;      // readers registered (live leases)
+  std::string record;         // its type as the registry keeps it: "<hash> <description>"
 };
 
 struct ServiceSummary {
@@ -74,7 +75,8 @@ class Inspector {
 
    private:
     friend class Inspector;
-    Tail(Inspector& inspector, std::string stream) : inspector_{&inspector}, stream_{std::move(stream)} {}
+    Tail(Inspector& inspector, std::string stream, std::string from)
+        : inspector_{&inspector}, stream_{std::move(stream)}, last_{std::move(from)} {}
 
     // [stream, [[id, [field, value, ...]], ...]]: checked, since another
     // process wrote it.
@@ -82,7 +84,7 @@ class Inspector {
 
     Inspector* inspector_;
     std::string stream_;
-    std::string last_ = "$";
+    std::string last_;  // the id of the last entry read (or of the newest when it was made)
     std::deque<StreamEntry> buffered_;
   };
 
