@@ -14,8 +14,6 @@ namespace {
 
 using K = TypeLayout::Kind;
 
-// A number's, boolean's or character's size: what it reaches (extent).
-std::size_t primitive_size(const TypeLayout& t) { return extent(t); }
 bool primitive(const TypeLayout& t) { return t.kind == K::number || t.kind == K::boolean || t.kind == K::character; }
 std::size_t align(std::size_t at, std::size_t to) { return (at + to - 1) / to * to; }
 
@@ -27,7 +25,7 @@ bool plain_at(const TypeLayout& t, std::size_t base, std::size_t& cdr) {
     case K::number:
     case K::boolean:
     case K::character: {
-      const auto n = primitive_size(t);
+      const auto n = extent(t);
       cdr = align(cdr, n);
       if (cdr != base) return false;
       cdr += n;
@@ -36,7 +34,7 @@ bool plain_at(const TypeLayout& t, std::size_t base, std::size_t& cdr) {
     case K::array:
       if (t.capacity == 0) return true;
       if (primitive(*t.element)) {  // consecutive elements of their own size: the first decides
-        if (t.stride != primitive_size(*t.element) || !plain_at(*t.element, base, cdr)) return false;
+        if (t.stride != extent(*t.element) || !plain_at(*t.element, base, cdr)) return false;
         cdr += (t.capacity - 1) * t.stride;
         return true;
       }
@@ -81,7 +79,7 @@ void encode_at(const TypeLayout& t, const std::byte* at, std::vector<std::byte>&
     case K::number:
     case K::boolean:
     case K::character: {
-      const auto n = primitive_size(t);
+      const auto n = extent(t);
       pad(n);
       put(at, n);
       return;
@@ -134,7 +132,7 @@ struct Decoder {
       case K::number:
       case K::boolean:
       case K::character: {
-        const auto n = primitive_size(t);
+        const auto n = extent(t);
         std::memcpy(to, take(n, n), n);
         return;
       }
