@@ -1,0 +1,115 @@
+#include "prime/system/host.hpp"
+
+#include <set>
+
+namespace prime::system {
+
+namespace detail {
+
+Links::Links(Plan p) : plan{std::move(p)} {
+  unsigned reached = 0;
+  for (const auto& [name, reach] : plan.reach) reached |= reach;
+  if (reached & Reach::same_machine)
+    shm = std::make_unique<shm::Core>(plan.shm_domain, shm::DomainOptions{.participant = plan.process});
+  if (reached & Reach::other_machine) {
+    if (!plan.redis)
+      throw Failure{{Errc::invalid_argument, "process '" + plan.process +
+                                                 "' has links to other machines and no Redis to carry them"}};
+    optimus = std::make_unique<optimus::Core>(optimus::Options{.url = *plan.redis, .domain = plan.optimus_domain});
+  }
+}
+
+void Links::stop() {
+  for (auto& loop : loops) loop.stop();
+  if (shm) shm->stop();
+  if (optimus) optimus->stop();
+  local.stop();
+}
+
+}  // namespace detail
+
+Registry& Registry::global() {
+  static Registry registry;
+  return registry;
+}
+
+void Registry::add(Component component) {
+  const auto type = component.type();
+  if (!components_.emplace(type, std::move(component)).second)
+    throw Failure{{Errc::in_use, "component '" + type + "' is registered twice"}};
+}
+
+const Component* Registry::find(std::string_view type) const {
+  const auto found = components_.find(type);
+  return found == components_.end() ? nullptr : &found->second;
+}
+
+std::vector<const Component*> Registry::components() const {
+  std::vector<const Component*> all;
+  for (const auto& [type, component] : components_) all.push_back(&component);
+  return all;
+}
+
+std::string param_problem(const Component& component, const Instance& instance) {
+  for (const auto& [name, value] : instance.params) {
+    const auto where = "component '" + instance.name + "' (" + component.type() + "): parameter '" + name + "'";
+    if (name.ends_with(".period_ms")) {
+      const auto trigger = name.substr(0, name.size() - std::string_view{".period_ms"}.size());
+      if (!component.trigger(trigger)) return where + ": no trigger '" + trigger + "' is declared";
+      const auto* ms = std::get_if<std::int64_t>(&value);
+      if (!ms) return where + " is an integer (milliseconds), given a " + std::string{param_type_name(value.index())};
+      if (*ms <= 0) return where + " must be positive, given " + std::to_string(*ms);
+      continue;
+    }
+    const auto* declared = component.param(name);
+    if (!declared) return where + " is not declared";
+    const bool number_from_integer = declared->value.index() == 2 && value.index() == 1;
+    if (declared->value.index() != value.index() && !number_from_integer)
+      return where + " is a " + std::string{param_type_name(declared->value.index())} + ", given a " +
+             std::string{param_type_name(value.index())};
+  }
+  return {};
+}
+
+Host::Host(Plan plan, const Registry& registry) {
+  std::set<std::string> names;
+  std::vector<const Component*> components;
+  for (auto& instance : plan.instances) {
+    const auto* component = registry.find(instance.component);
+    if (!component)
+      throw Failure{{Errc::not_found, "process '" + plan.process + "': no component '" + instance.component +
+                                          "' is registered (instance '" + instance.name + "')"}};
+    if (!names.insert(instance.name).second)
+      throw Failure{{Errc::invalid_argument, "process '" + plan.process + "': instance '" + instance.name + "' is named twice"}};
+    if (auto problem = param_problem(*component, instance); !problem.empty())
+      throw Failure{{problem.find(" is a ") != std::string::npos ? Errc::type_mismatch : Errc::invalid_argument, problem}};
+    for (auto& [name, value] : instance.params)  // an integer given for a number
+      if (const auto* declared = component->param(name); declared && declared->value.index() == 2)
+        if (const auto* i = std::get_if<std::int64_t>(&value)) value = static_cast<double>(*i);
+    components.push_back(component);
+  }
+  links_ = std::make_unique<detail::Links>(std::move(plan));
+  try {
+    for (std::size_t i = 0; i < components.size(); ++i) {
+      const auto& instance = links_->plan.instances[i];
+      contexts_.push_back(std::make_unique<Context>(*components[i], instance, *links_));
+      if (!components[i]->builder()) continue;
+      try {
+        components[i]->builder()(*contexts_.back());
+      } catch (const Failure& f) {
+        throw Failure{{f.error().code, "building component '" + instance.name + "': " + f.error().message}};
+      } catch (const std::exception& e) {
+        throw Failure{{Errc::block_failed, "building component '" + instance.name + "': " + e.what()}};
+      }
+    }
+  } catch (...) {
+    links_->stop();
+    throw;
+  }
+}
+
+Host::~Host() { stop(); }
+
+void Host::stop() { links_->stop(); }
+
+}  // namespace prime::system

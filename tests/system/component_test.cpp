@@ -1,0 +1,221 @@
+// Components alone (the harness) and system files read and checked against
+// the components, with no process started.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <filesystem>
+
+#include "pipeline.hpp"
+#include "support/failure.hpp"
+
+namespace {
+
+using namespace std::chrono_literals;
+using pipeline::Count;
+using prime::Errc;
+using prime::test::fails_with;
+namespace sys = prime::system;
+
+TEST(ComponentHarness, FeedsAComponentAndReadsWhatItPublishesAndServes) {
+  sys::Harness h{pipeline::doubler(), {{"factor", std::int64_t{5}}}};
+  auto counts = h.feed<Count>("counts");
+  auto doubled = h.probe<Count>("doubled");
+  auto triple = h.caller<Count, Count>("triple");
+  h.start();
+  for (std::int64_t n = 1; n <= 20; ++n) ASSERT_TRUE(counts.publish(Count{n}, prime::Clock::time_point{std::chrono::seconds{n}}));
+  for (std::int64_t n = 1; n <= 20; ++n) {
+    auto got = doubled.read_for(5s);
+    ASSERT_TRUE(got) << got.error().describe();
+    EXPECT_EQ(got->value.n, 5 * n);
+    EXPECT_EQ(got->stamp, prime::Clock::time_point{std::chrono::seconds{n}});  // the stamp goes with the value
+  }
+  auto answer = triple.call(Count{7});
+  ASSERT_TRUE(answer) << answer.error().describe();
+  EXPECT_EQ(answer->n, 21);
+  auto refused = triple.call(Count{-1});  // what the block throws is the caller's error
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().code, Errc::block_failed);
+  EXPECT_NE(refused.error().message.find("negative count"), std::string::npos) << refused.error().message;
+}
+
+TEST(ComponentHarness, RunsAComponentsTriggerWithItsParameters) {
+  sys::Harness h{pipeline::counter(), {{"limit", std::int64_t{10}}, {"tick.period_ms", std::int64_t{1}}}};
+  auto counts = h.probe<Count>("counts");
+  h.start();
+  for (std::int64_t n = 1; n <= 10; ++n) {
+    auto got = counts.read_for(5s);
+    ASSERT_TRUE(got) << got.error().describe();
+    EXPECT_EQ(got->value.n, n);
+  }
+  h.stop();
+  EXPECT_FALSE(counts.try_read());  // the limit held: nothing past 10
+}
+
+TEST(ComponentHarness, AnsweredCallsComeFromTheTestsServer) {
+  sys::Harness h{pipeline::checker()};
+  auto doubled = h.feed<Count>("doubled");
+  std::atomic<int> calls = 0;
+  h.serve<Count, Count>("triple", [&](const Count& c) {
+    ++calls;
+    return Count{c.n * 3};
+  });
+  auto& o = pipeline::observed();
+  o.clear();
+  h.start();
+  for (std::int64_t n = 1; n <= 5; ++n) ASSERT_TRUE(doubled.publish(Count{2 * n}));
+  EXPECT_TRUE(o.wait_for(5s, [](const auto& seen) { return seen.size() >= 5; }));
+  h.stop();
+  std::scoped_lock lock{o.mutex};
+  ASSERT_EQ(o.seen.size(), 5u);
+  for (std::int64_t n = 1; n <= 5; ++n) EXPECT_EQ(o.seen[n - 1], (pipeline::Seen{2 * n, 6 * n}));
+  EXPECT_EQ(calls, 5);
+}
+
+TEST(ComponentHarness, APortUsedAsItWasNotDeclaredIsRefusedByName) {
+  const auto wrong_type = sys::Component{"test.wrong_type"}.subscribes<Count>("counts").build([](sys::Context& ctx) {
+    (void)ctx.input<double>("counts");
+  });
+  EXPECT_TRUE(fails_with([&] { sys::Harness{wrong_type}.start(); }, Errc::type_mismatch, "'counts' is declared as"));
+  const auto undeclared = sys::Component{"test.undeclared"}.build([](sys::Context& ctx) { (void)ctx.output<Count>("counts"); });
+  EXPECT_TRUE(fails_with([&] { sys::Harness{undeclared}.start(); }, Errc::invalid_argument, "does not declare that it publishes 'counts'"));
+  EXPECT_TRUE(fails_with([&] { sys::Harness(pipeline::doubler(), {{"factor", std::string{"two"}}}).start(); }, Errc::type_mismatch,
+                         "parameter 'factor' is a integer, given a string"));
+  EXPECT_TRUE(fails_with([&] { sys::Harness(pipeline::doubler(), {{"gain", 1.0}}).start(); }, Errc::invalid_argument,
+                         "parameter 'gain' is not declared"));
+}
+
+// A system file written for one test, removed after it.
+class SystemFile : public ::testing::Test {
+ protected:
+  void SetUp() override { pipeline::register_all(); }
+  void TearDown() override { std::filesystem::remove(path_); }
+  std::string write(const std::string& text) {
+    std::ofstream{path_} << text;
+    return path_;
+  }
+  const std::string path_ = ::testing::TempDir() + "/system_" + std::to_string(::getpid()) + ".yaml";
+  const sys::Registry& registry = sys::Registry::global();
+};
+
+constexpr const char* kPipeline = R"(system: pipeline_test
+machines:
+  a: {redis: "tcp://127.0.0.1:1"}
+  b: {redis: "tcp://127.0.0.1:1"}
+components:
+  counter: {type: test.counter, params: {limit: 12}}
+  doubler: {type: test.doubler, params: {factor: 3}}
+  checker: {type: test.checker}
+topics:
+  counts: {capacity: 128, overflow: block}
+placements:
+  one:
+    all: [counter, doubler, checker]
+  split:
+    counter: [counter]
+    doubler: {components: [doubler], restart: on_failure}
+    checker: [checker]
+  machines:
+    counter: {components: [counter], machine: a}
+    rest: {components: [doubler, checker], machine: b}
+)";
+
+TEST_F(SystemFile, PlansEachLinkByWhereItsEndsArePlaced) {
+  const auto system = sys::load_system(write(kPipeline));
+  EXPECT_TRUE(sys::problems(system, registry, "split").empty());
+  auto one = sys::plan_of(system, registry, "one", "all");
+  EXPECT_EQ(one.instances.size(), 3u);
+  EXPECT_EQ(one.reach["counts"], sys::Reach::here);
+  EXPECT_EQ(one.reach["triple"], sys::Reach::here);
+  EXPECT_EQ(one.topic_qos["counts"].capacity, 128u);
+  EXPECT_EQ(one.shm_domain, "pipeline_test");
+
+  auto doubler = sys::plan_of(system, registry, "split", "doubler");
+  EXPECT_EQ(doubler.reach["counts"], sys::Reach::same_machine);
+  EXPECT_EQ(doubler.reach["doubled"], sys::Reach::same_machine);
+  EXPECT_EQ(doubler.reach["triple"], sys::Reach::here | sys::Reach::same_machine);  // served here, called from checker
+  EXPECT_EQ(std::get<std::int64_t>(doubler.instances.at(0).params.at("factor")), 3);
+
+  auto counter = sys::plan_of(system, registry, "machines", "counter");
+  EXPECT_EQ(counter.reach["counts"], sys::Reach::other_machine);
+  EXPECT_EQ(counter.redis, "tcp://127.0.0.1:1");
+  auto rest = sys::plan_of(system, registry, "machines", "rest");
+  EXPECT_EQ(rest.reach["counts"], sys::Reach::other_machine);
+  EXPECT_EQ(rest.reach["doubled"], sys::Reach::here);
+
+  EXPECT_EQ(sys::start_order(system, registry, "split"), (std::vector<std::string>{"counter", "doubler", "checker"}));
+}
+
+TEST_F(SystemFile, StartsAProcessAfterThoseServingWhatItCalls) {
+  const auto system = sys::load_system(write(R"(components:
+  counter: {type: test.counter}
+  doubler: {type: test.doubler}
+  checker: {type: test.checker}
+placements:
+  p: {checker: [checker], counter: [counter], doubler: [doubler]}
+)"));
+  EXPECT_EQ(sys::start_order(system, registry, "p"), (std::vector<std::string>{"counter", "doubler", "checker"}));
+}
+
+TEST_F(SystemFile, TakesParameterOverridesAsTheCommandLineGivesThem) {
+  const auto system = sys::load_system(write(kPipeline), {"doubler.factor=7", "counter.tick.period_ms=5"});
+  auto plan = sys::plan_of(system, registry, "one", "all");
+  EXPECT_EQ(std::get<std::int64_t>(plan.instances.at(1).params.at("factor")), 7);
+  EXPECT_EQ(std::get<std::int64_t>(plan.instances.at(0).params.at("tick.period_ms")), 5);
+  EXPECT_TRUE(fails_with([&] { (void)sys::load_system(path_, {"nobody.factor=1"}); }, Errc::invalid_argument, "has no component 'nobody'"));
+}
+
+// Each wrong system names the file, the line and what is wrong.
+struct WrongSystem {
+  const char* name;
+  std::string text;
+  std::string expected;  // in the first problem
+};
+
+void PrintTo(const WrongSystem& wrong, std::ostream* out) { *out << wrong.name; }
+
+class WrongSystems : public SystemFile, public ::testing::WithParamInterface<WrongSystem> {};
+
+TEST_P(WrongSystems, AreRefusedNamingTheLineAndWhatIsWrong) {
+  const auto& wrong = GetParam();
+  const auto path = write(wrong.text);
+  std::vector<std::string> found;
+  try {
+    found = sys::problems(sys::load_system(path), registry, "p");
+  } catch (const prime::Failure& f) {
+    found.push_back(f.what());
+  }
+  ASSERT_FALSE(found.empty()) << "nothing was found wrong";
+  EXPECT_NE(found.front().find(path + ":"), std::string::npos) << found.front();
+  EXPECT_NE(found.front().find(wrong.expected), std::string::npos) << found.front();
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    SystemFile, WrongSystems,
+    ::testing::Values(
+        WrongSystem{"unknown_component", "components:\n  c: {type: test.nothing}\nplacements:\n  p: {a: [c]}\n",
+                    ":2: component 'c': no component type 'test.nothing' is registered"},
+        WrongSystem{"unknown_parameter", "components:\n  c:\n    type: test.counter\n    params: {speed: 3}\nplacements:\n  p: {a: [c]}\n",
+                    ":4: component 'c' (test.counter): parameter 'speed' is not declared"},
+        WrongSystem{"wrong_parameter_type", "components:\n  c:\n    type: test.counter\n    params:\n      limit: \"many\"\nplacements:\n  p: {a: [c]}\n",
+                    ":5: component 'c' (test.counter): parameter 'limit' is a integer, given a string"},
+        WrongSystem{"two_publishers",
+                    "components:\n  a: {type: test.counter}\n  b: {type: test.counter}\nplacements:\n  p: {x: [a, b]}\n",
+                    ":3: topic 'counts' has two publishers: 'a' and 'b'"},
+        WrongSystem{"nobody_serves", "components:\n  c: {type: test.checker}\nplacements:\n  p: {x: [c]}\n",
+                    ":2: 'c' calls the service 'triple', which nobody serves"},
+        WrongSystem{"no_redis",
+                    "components:\n  a: {type: test.counter}\n  b: {type: test.doubler}\nplacements:\n  p:\n    x: {components: [a], machine: m1}\n    y: {components: [b], machine: m2}\n",
+                    ":6: process 'x' on machine 'm1' is linked to another machine ('counts') and its machine has no Redis"},
+        WrongSystem{"placed_twice", "components:\n  a: {type: test.counter}\nplacements:\n  p: {x: [a], y: [a]}\n",
+                    "component 'a' is placed in 'x' and in 'y'"},
+        WrongSystem{"placed_nowhere", "components:\n  a: {type: test.counter}\n  b: {type: test.doubler}\nplacements:\n  p: {x: [a]}\n",
+                    ":5: placement 'p' places component 'b' in no process"},
+        WrongSystem{"no_placement", "components:\n  a: {type: test.counter}\nplacements:\n  q: {x: [a]}\n", "no placement 'p' (it has q)"},
+        WrongSystem{"unknown_key", "components:\n  a: {type: test.counter, param: {}}\nplacements:\n  p: {x: [a]}\n",
+                    ":2: unknown key 'param' in component 'a' (it takes type, params)"},
+        WrongSystem{"bad_overflow", "components:\n  a: {type: test.counter}\ntopics:\n  counts: {overflow: wait}\nplacements:\n  p: {x: [a]}\n",
+                    ":4: topic 'counts': overflow is drop_oldest or block, not 'wait'"},
+        WrongSystem{"not_yaml", "components: [a\n", ":2: not YAML"}),
+    [](const auto& info) { return std::string{info.param.name}; });
+
+}  // namespace
