@@ -9,8 +9,14 @@ namespace detail {
 Links::Links(Plan p) : plan{std::move(p)} {
   unsigned reached = 0;
   for (const auto& [name, reach] : plan.reach) reached |= reach;
-  if (reached & Reach::same_machine)
-    shm = std::make_unique<shm::Core>(plan.shm_domain, shm::DomainOptions{.participant = plan.process});
+  if ((reached & Reach::same_machine) || plan.join_domain) {
+    // Listed by `prime ls` as the process and the components it hosts.
+    std::string participant = plan.process + " (";
+    for (std::size_t i = 0; i < plan.instances.size(); ++i) participant += (i ? ", " : "") + plan.instances[i].name;
+    participant += ")";
+    if (participant.size() > 47) participant = plan.process + " (" + std::to_string(plan.instances.size()) + " components)";
+    shm = std::make_unique<shm::Core>(plan.shm_domain, shm::DomainOptions{.participant = participant});
+  }
   if (reached & Reach::other_machine) {
     if (!plan.redis)
       throw Failure{{Errc::invalid_argument, "process '" + plan.process +

@@ -384,12 +384,15 @@ Plan plan_of(const SystemSpec& system, const Registry& registry, std::string_vie
     throw Failure{{Errc::invalid_argument, system.file + ": placement '" + placement->name + "' has no process '" +
                                                std::string{process_name} + "'"}};
   Plan plan{.process = me->name, .topic_qos = system.topics, .ns = system.ns, .shm_domain = system.domain,
-            .optimus_domain = system.domain};
+            .join_domain = true, .optimus_domain = system.domain};
   if (const auto redis = system.redis.find(me->machine); redis != system.redis.end()) plan.redis = redis->second;
   for (const auto& name : me->instances)
     for (const auto& instance : system.instances)
       if (instance.name == name) plan.instances.push_back(instance);
   const auto ends = ends_of(system, registry, *placement);
+  // A topic's QoS is the system file's, else its publisher's: every end
+  // opens it alike.
+  for (const auto& [topic, publishers] : ends.publishers) plan.topic_qos.emplace(topic, publishers.front().port->qos);
   const auto mine = [&](const End& e) { return e.process == &*me; };
   const auto add = [&](const std::string& name, unsigned reach) { plan.reach[name] |= reach; };
   // Outputs and services reach every other end; inputs and calls come from one.

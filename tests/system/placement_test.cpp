@@ -12,6 +12,7 @@
 
 #include "optimus/support/redis_server.hpp"
 #include "pipeline.hpp"
+#include "shm/domain.hpp"
 #include "shm/peer_process.hpp"
 
 namespace {
@@ -54,10 +55,7 @@ placements:
     counter: {components: [counter], machine: a}
 )";
   }
-  void TearDown() override {
-    std::filesystem::remove(path_);
-    std::filesystem::remove_all("/dev/shm/prime." + domain_);
-  }
+  void TearDown() override { std::filesystem::remove(path_); }
 
   // Starts `process` of the placement in a process of its own, once it is ready.
   void start(std::optional<PeerProcess>& peer, const std::string& process) {
@@ -73,7 +71,7 @@ placements:
     return true;
   }
 
-  const std::string domain_ = "placement_" + std::to_string(::getpid());
+  const std::string domain_ = prime::test::unique_domain("placement");
   const std::string path_ = ::testing::TempDir() + "/" + domain_ + ".yaml";
   prime::test::RedisServer redis_;
   std::int64_t limit_ = 200;

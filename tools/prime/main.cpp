@@ -2,6 +2,7 @@
 //
 //   prime [--domain D | --redis URL] [--json] <command>
 //   prime bench [--quick] [--out DIR]     what each hop costs: a report folder
+//   prime launch FILE [--placement NAME]  a system's processes, started and supervised
 //
 // Shm domains (the default; --domain, or PRIME_DOMAIN, or "robot") and
 // Optimus domains (--redis tcp://host:port or unix:///path, with --domain as
@@ -27,6 +28,7 @@
 #include "prime/logic/error.hpp"
 #include "bench/command.hpp"
 #include "json.hpp"
+#include "launch_command.hpp"
 #include "play_command.hpp"
 #include "record_commands.hpp"
 #include "shm_commands.hpp"
@@ -199,6 +201,16 @@ int main(int argc, char** argv) {
       ->allow_extra_args(false);
   play->add_option("--stamps", play_options.stamps, "the samples' stamps: now (when published, the default) or keep (as recorded)")
       ->check(CLI::IsMember({"now", "keep"}));
+  LaunchOptions launch_options;
+  auto* launch = command("launch", "start the processes of a system file's placement in order of readiness, supervise them, stop them on Ctrl-C",
+                         [&] { return prime::tool::launch(launch_options); });
+  launch->add_option("file", launch_options.file, "the system file (YAML)")->required();
+  launch->add_option("--placement", launch_options.placement, "which of its placements (default: the first)");
+  launch->add_option("--param", launch_options.params, "component.name=value: a parameter's value, for every process (repeatable)")
+      ->allow_extra_args(false);
+  launch->add_option("--executable", launch_options.executable, "what every process runs, instead of what the file says");
+  launch->add_option("--grace", launch_options.grace, "seconds from SIGTERM to SIGKILL when stopping (default 5)")->check(seconds);
+  launch->add_option("--ready-timeout", launch_options.ready_timeout, "seconds a process may take to be ready (default 20)")->check(seconds);
   bench::Options b;
   auto* bench = command("bench", "measure what each hop costs, against the floors and the peers: a report folder",
                         [&] {

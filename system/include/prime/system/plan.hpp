@@ -45,6 +45,10 @@ struct Plan {
   // ("robot1" makes "sensors/lidar" "robot1/sensors/lidar").
   std::string ns{};
   std::string shm_domain = "prime";
+  // Join the Shm domain even with no link through it, so that `prime ls`
+  // lists the process, its components and its loops (as a launched
+  // process does).
+  bool join_domain = false;
   // Redis, for links to other machines: "tcp://host:port".
   std::optional<std::string> redis{};
   std::string optimus_domain = "prime";

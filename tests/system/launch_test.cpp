@@ -1,0 +1,110 @@
+// `prime launch` against real processes: a placement started in order of
+// readiness with its output prefixed, shown by `prime ls`, a killed process
+// restarted by its policy, Ctrl-C stopping every process, and a wrong
+// system refused before anything starts.
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "shm/domain.hpp"
+#include "shm/peer_process.hpp"
+#include "tool_runs.hpp"
+
+namespace {
+
+using namespace std::chrono_literals;
+using prime::test::PeerProcess;
+
+class Launch : public ::testing::Test {
+ protected:
+  void TearDown() override { std::filesystem::remove(path_); }
+  void write(const std::string& placements) {
+    std::ofstream{path_} << "system: " << domain_ << R"(
+components:
+  counter: {type: test.counter, params: {limit: 1000000}}
+  doubler: {type: test.doubler}
+  checker: {type: test.checker}
+placements:
+)" << placements;
+  }
+  PeerProcess launch(std::vector<std::string> more = {}) {
+    std::vector<std::string> argv{PRIME_TOOL_PATH, "launch", path_, "--executable", SYSTEM_PEER_PATH, "--grace", "5"};
+    argv.insert(argv.end(), more.begin(), more.end());
+    return PeerProcess::command(argv, true);
+  }
+
+  const std::string domain_ = prime::test::unique_domain("launch");
+  const std::string path_ = ::testing::TempDir() + "/" + domain_ + ".yaml";
+};
+
+TEST_F(Launch, StartsEachProcessAfterWhatItCallsIsServedAndStopsThemAllOnCtrlC) {
+  write("  split:\n    checker: [checker]\n    counter: [counter]\n    doubler: {components: [doubler], restart: on_failure}\n");
+  auto launcher = launch({"--placement", "split"});
+  // checker calls doubler's service: doubler starts before it.
+  ASSERT_TRUE(launcher.line_starting("launch  | placement 'split' of " + path_ + ": starting counter, doubler, checker", 20s));
+  for (const std::string name : {"counter", "doubler", "checker"}) {
+    ASSERT_TRUE(launcher.line_starting(std::string{name} + std::string(8 - std::string{name}.size(), ' ') + "| [prime] process '" +
+                                       name + "' ready", 20s)) << name;
+    ASSERT_TRUE(launcher.line_starting("launch  | '" + std::string{name} + "' is ready (pid ", 20s)) << name;
+  }
+  ASSERT_TRUE(launcher.says("launch  | every process is ready; Ctrl-C stops them", 20s));
+
+  // prime ls shows each process with the components it hosts.
+  const auto ls = prime::test::prime(domain_, {"ls"});
+  EXPECT_EQ(ls.code, 0) << ls.out;
+  for (const std::string shown : {"counter (counter)", "doubler (doubler)", "checker (checker)"})
+    EXPECT_NE(ls.out.find(shown), std::string::npos) << ls.out;
+
+  // A process killed with kill -9 is restarted by its policy (on_failure).
+  const auto doubler = ls.out.find("doubler (doubler)");
+  ASSERT_NE(doubler, std::string::npos);
+  const auto pid_line = ls.out.substr(doubler, ls.out.find('\n', doubler) - doubler);
+  pid_t pid = 0;
+  for (std::size_t at = pid_line.find_first_of("0123456789", 17); at < pid_line.size() && std::isdigit(pid_line[at]); ++at)
+    pid = pid * 10 + (pid_line[at] - '0');
+  ASSERT_GT(pid, 0) << pid_line;
+  ::kill(pid, SIGKILL);
+  EXPECT_TRUE(launcher.line_starting("launch  | 'doubler' was killed by signal 9 (Killed); restarting it in 500 ms (on_failure)", 20s));
+  EXPECT_TRUE(launcher.line_starting("launch  | 'doubler' restarted (pid ", 20s));
+  EXPECT_TRUE(launcher.line_starting("doubler | [prime] process 'doubler' ready", 20s));
+
+  ::kill(launcher.pid(), SIGINT);
+  EXPECT_TRUE(launcher.says("launch  | stopped", 20s));
+  EXPECT_EQ(launcher.exit_code(20s), 0);
+  const auto after = prime::test::prime(domain_, {"ls"});  // nobody is left in the domain
+  for (const std::string shown : {"counter (counter)", "doubler (doubler)", "checker (checker)"})
+    EXPECT_EQ(after.out.find(shown), std::string::npos) << after.out;
+}
+
+TEST_F(Launch, AProcessThatEndsWithNoRestartEndsTheLaunchWithItsFailure) {
+  write("  p:\n    doubler: [doubler]\n    rest: [counter, checker]\n");
+  auto launcher = launch();  // the first placement
+  ASSERT_TRUE(launcher.says("launch  | every process is ready; Ctrl-C stops them", 20s));
+  const auto ls = prime::test::prime(domain_, {"ls"});
+  const auto at = ls.out.find("rest (counter, checker)");
+  ASSERT_NE(at, std::string::npos) << ls.out;
+  ::kill(launcher.pid(), SIGTERM);
+  EXPECT_EQ(launcher.exit_code(20s), 0);
+}
+
+TEST_F(Launch, AWrongSystemIsRefusedBeforeAnythingStarts) {
+  write("  p:\n    one: [counter, doubler]\n");  // checker placed nowhere
+  auto launcher = launch();
+  const auto out = launcher.all_output(30s);
+  EXPECT_EQ(launcher.exit_code(20s), 2) << out;
+  EXPECT_NE(out.find(path_ + ":7: placement 'p' places component 'checker' in no process"), std::string::npos) << out;
+  EXPECT_NE(out.find("nothing was started"), std::string::npos) << out;
+  EXPECT_EQ(out.find("[prime] process"), std::string::npos) << out;
+}
+
+TEST_F(Launch, AProcessThatFailsToStartStopsTheLaunch) {
+  write("  p:\n    one: [counter, doubler, checker]\n");
+  auto launcher = launch({"--param", "counter.limit=many"});  // a string for an integer
+  const auto out = launcher.all_output(30s);
+  EXPECT_EQ(launcher.exit_code(20s), 2) << out;
+  EXPECT_NE(out.find("parameter 'limit' is a integer, given a string"), std::string::npos) << out;
+}
+
+}  // namespace
