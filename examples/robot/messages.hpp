@@ -48,9 +48,10 @@ PRIME_DESCRIBE(Applied, driving)
 struct DriverStats {
   std::uint32_t commands;
   double mean_ms, p99_ms, max_ms;
-  bool safe_stop;  // no command for 100 ms: the motors are stopped
+  bool safe_stop;            // no command for safe_after_ms: the motors are stopped now
+  std::uint32_t safe_stops;  // times in this second it stopped the motors so
 };
-PRIME_DESCRIBE(DriverStats, commands, mean_ms, p99_ms, max_ms, safe_stop)
+PRIME_DESCRIBE(DriverStats, commands, mean_ms, p99_ms, max_ms, safe_stop, safe_stops)
 
 inline constexpr double kRoom = 10.0;  // metres, square
 

@@ -27,9 +27,9 @@ Links::Links(Plan p) : plan{std::move(p)} {
 
 void Links::stop() {
   for (auto& loop : loops) loop.stop();
+  local.stop();  // the chains reading inputs, which may call services through the media
   if (shm) shm->stop();
   if (optimus) optimus->stop();
-  local.stop();
 }
 
 }  // namespace detail

@@ -53,11 +53,11 @@ std::string links(const Plan& plan) {
 }  // namespace
 
 int run(int argc, char** argv) {
-  std::string file, placement, process;
+  std::string file, placement, process, domain;
   std::vector<std::string> overrides;
   enum class Mode { none, host, check, describe } mode = Mode::none;
   const auto usage = [&](const std::string& why) {
-    std::fprintf(stderr, "%s: %s\nusage: %s --prime-system FILE --placement NAME --process NAME [--param component.name=value]...\n"
+    std::fprintf(stderr, "%s: %s\nusage: %s --prime-system FILE --placement NAME --process NAME [--param component.name=value]... [--domain D]\n"
                          "       %s --prime-check FILE --placement NAME\n       %s --prime-describe\n",
                  argv[0], why.c_str(), argv[0], argv[0], argv[0]);
     return 2;
@@ -67,7 +67,8 @@ int run(int argc, char** argv) {
     const auto value = [&]() -> const char* { return i + 1 < argc ? argv[++i] : nullptr; };
     if (arg == "--prime-describe") {
       mode = Mode::describe;
-    } else if (arg == "--prime-system" || arg == "--prime-check" || arg == "--placement" || arg == "--process" || arg == "--param") {
+    } else if (arg == "--prime-system" || arg == "--prime-check" || arg == "--placement" || arg == "--process" || arg == "--param" ||
+               arg == "--domain") {
       const char* v = value();
       if (!v) return usage(arg + " needs a value");
       if (arg == "--prime-system" || arg == "--prime-check") {
@@ -77,6 +78,8 @@ int run(int argc, char** argv) {
         placement = v;
       } else if (arg == "--process") {
         process = v;
+      } else if (arg == "--domain") {
+        domain = v;
       } else {
         overrides.emplace_back(v);
       }
@@ -92,7 +95,8 @@ int run(int argc, char** argv) {
   }
   if (placement.empty()) return usage("--placement is needed");
   try {
-    const auto system = load_system(file, overrides);
+    auto system = load_system(file, overrides);
+    if (!domain.empty()) system.domain = domain;
     if (mode == Mode::check) {
       const auto found = problems(system, registry, placement, true);
       for (const auto& p : found) std::fprintf(stderr, "%s\n", p.c_str());

@@ -65,7 +65,7 @@ struct Reader {
 Qos topic_qos(const Reader& r, const std::string& name, const YAML::Node& node) {
   const auto what = "topic '" + name + "'";
   r.expect_map(node, what);
-  r.known_keys(node, {"capacity", "overflow", "block_timeout_ms"}, what);
+  r.known_keys(node, {"capacity", "overflow", "block_timeout_ms", "expose"}, what);
   Qos qos;
   if (node["capacity"]) {
     const auto capacity = r.integer(node["capacity"], what + ": capacity");
@@ -165,7 +165,15 @@ SystemSpec load_system(const std::string& path, const std::vector<std::string>& 
   }
   if (const auto topics = root["topics"]) {
     r.expect_map(topics, "topics");
-    for (const auto& entry : topics) system.topics[entry.first.Scalar()] = topic_qos(r, entry.first.Scalar(), entry.second);
+    for (const auto& entry : topics) {
+      const auto name = entry.first.Scalar();
+      system.topics[name] = topic_qos(r, name, entry.second);
+      if (const auto expose = entry.second["expose"]) {
+        bool on = false;
+        if (!expose.IsScalar() || !YAML::convert<bool>::decode(expose, on)) r.fail(expose, "topic '" + name + "': expose must be true or false");
+        if (on) system.exposed.insert(name);
+      }
+    }
   }
   const auto placements = root["placements"];
   if (!placements) r.fail(root, "the system file has no placements");
@@ -396,11 +404,15 @@ Plan plan_of(const SystemSpec& system, const Registry& registry, std::string_vie
   const auto mine = [&](const End& e) { return e.process == &*me; };
   const auto add = [&](const std::string& name, unsigned reach) { plan.reach[name] |= reach; };
   // Outputs and services reach every other end; inputs and calls come from one.
+  // A topic nobody in the system reads (or one the file exposes) goes into
+  // the Shm domain too: for tools and programs outside the system.
   for (const auto& [topic, publishers] : ends.publishers) {
     const auto subscribers = ends.subscribers.find(topic);
     for (const auto& p : publishers) {
-      if (!mine(p) || subscribers == ends.subscribers.end()) continue;
-      for (const auto& s : subscribers->second) add(topic, reach_between(*me, *s.process));
+      if (!mine(p)) continue;
+      if (subscribers == ends.subscribers.end() || system.exposed.contains(topic)) add(topic, Reach::same_machine);
+      if (subscribers != ends.subscribers.end())
+        for (const auto& s : subscribers->second) add(topic, reach_between(*me, *s.process));
     }
   }
   for (const auto& [topic, subscribers] : ends.subscribers) {

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "prime/system.hpp"
+#include "prime/topology/forward.hpp"
 
 namespace pipeline {
 

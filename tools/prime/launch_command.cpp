@@ -67,6 +67,7 @@ struct Child {
 std::vector<std::string> arguments(const Child& c, const LaunchOptions& o, const std::string& placement) {
   std::vector<std::string> args{c.executable, "--prime-system", o.file, "--placement", placement, "--process", c.spec.name};
   for (const auto& p : o.params) args.insert(args.end(), {"--param", p});
+  if (!o.domain.empty()) args.insert(args.end(), {"--domain", o.domain});
   return args;
 }
 

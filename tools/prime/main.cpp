@@ -226,6 +226,9 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : int{kUsage};
   }
+  // A domain named on the command line (or by $PRIME_DOMAIN) replaces the
+  // system file's for what prime launch starts.
+  if (app.count("--domain") > 0 || std::getenv("PRIME_DOMAIN")) launch_options.domain = o.domain;
   std::signal(SIGINT, [](int) { std::_Exit(kInterrupted); });  // replaced by commands that want to finish their report
   // A file past its size limit (ulimit -f) is an error the command reports
   // (EFBIG, a recording's no_space), not a signal that kills it mid-write.

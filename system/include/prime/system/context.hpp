@@ -14,7 +14,7 @@
 #include "prime/logic/error.hpp"
 #include "prime/system/component.hpp"
 #include "prime/system/detail/links.hpp"
-#include "prime/topology/forward.hpp"
+#include "prime/system/input.hpp"
 #include "prime/topology/local_source.hpp"
 #include "prime/topology/loop.hpp"
 
@@ -151,39 +151,38 @@ class Context {
     return Output<T>{std::move(state)};
   }
 
-  // The topic the component subscribes to as `port`: a source of values,
-  // to link chains to (`ctx.input<Scan>("lidar") | local.chain(f)`), sync
-  // or collect. Its values come from the publisher's process, machine or
-  // from another, as the placement links it; readers in one process share
-  // one in-process end.
+  // The topic the component subscribes to as `port` (see Input), read
+  // where the placement put its publisher.
   template <class T>
-  [[nodiscard]] LocalSource<T> input(const std::string& port) {
+  [[nodiscard]] Input<T> input(const std::string& port) {
     const auto& declared = check<T>(port, PortKind::subscribes);
     const auto reach = links_.reach(port);
-    const auto qos = links_.topic_qos(port, declared.qos);
-    std::scoped_lock lock{links_.mutex};
-    if (const auto found = links_.topics.find(port); found != links_.topics.end())
-      return typed<LocalSource<T>>(found->second, port);
-    auto local = make_hub<T>(port, qos);
+    const auto reader_qos = declared.qos;
+    typename Input<T>::Open open;
+    std::string medium = "local";
     if (reach & Reach::here) {
-      // published in this process: its output finds this end
+      open = [local = hub<T>(port, links_.topic_qos(port, declared.qos))](const Qos& qos) { return local.subscribe(qos); };
     } else if (reach & Reach::same_machine) {
       if constexpr (detail::Crosses<T>) {
-        auto topic = links_.shm->subscribe<T>(links_.wire_name(port), {}, shm_qos(qos));
-        forward(topic, [local](const shm::View<T>& v, Clock::time_point stamp) { local.publish(*v, stamp); }, port);
+        auto topic = links_.shm->subscribe<T>(links_.wire_name(port), {.spin = std::chrono::duration_cast<std::chrono::microseconds>(reader_qos.spin)},
+                                              shm_qos(links_.topic_qos(port, declared.qos)));
+        open = [topic](const Qos&) { return Reader<T>{std::make_unique<detail::CopyingReader<T>>(topic.subscribe())}; };
+        medium = "shm";
       } else {
         cannot_cross<T>(port, "another process");
       }
     } else if (reach & Reach::other_machine) {
       if constexpr (detail::Crosses<T>) {
-        auto topic = links_.optimus->subscribe<T>(links_.wire_name(port), qos);
-        forward(topic, [local](const T& v, Clock::time_point stamp) { local.publish(v, stamp); }, port);
+        auto topic = links_.optimus->subscribe<T>(links_.wire_name(port), reader_qos);
+        open = [topic](const Qos&) { return topic.subscribe(); };
+        medium = "optimus";
       } else {
         cannot_cross<T>(port, "another machine");
       }
+    } else {  // nobody publishes it: an input that stays empty
+      open = [local = hub<T>(port, declared.qos)](const Qos& qos) { return local.subscribe(qos); };
     }
-    links_.topics.emplace(port, local);
-    return local;
+    return Input<T>{port, reader_qos, links_.local.runtime(), Graph::node(port, "source", medium), std::move(open)};
   }
 
   // Serves `block` (any callable or chain taking `const In&`, giving Out)
@@ -320,17 +319,13 @@ class Context {
     detail::refuse(Errc::type_mismatch, where() + ": '" + port + "' is carried in this process with another type");
   }
 
-  template <class T>
-  LocalSource<T> make_hub(const std::string& port, const Qos& qos) {
-    return LocalSource<T>{port, qos, links_.local.runtime(), Graph::node(port, "source", "local")};
-  }
   // The in-process end of the topic: made by whichever of its ends comes first.
   template <class T>
   LocalSource<T> hub(const std::string& port, const Qos& qos) {
     std::scoped_lock lock{links_.mutex};
     if (const auto found = links_.topics.find(port); found != links_.topics.end())
       return typed<LocalSource<T>>(found->second, port);
-    auto local = make_hub<T>(port, qos);
+    LocalSource<T> local{port, qos, links_.local.runtime(), Graph::node(port, "source", "local")};
     links_.topics.emplace(port, local);
     return local;
   }

@@ -5,8 +5,9 @@ namespace prime::system {
 // The main of a program that hosts components (registered with
 // PRIME_COMPONENT), as `prime launch` starts it:
 //
-//   program --prime-system FILE --placement NAME --process NAME [--param component.name=value]...
-//       hosts that process of the placement until SIGINT or SIGTERM; when
+//   program --prime-system FILE --placement NAME --process NAME [--param component.name=value]... [--domain D]
+//       hosts that process of the placement (in domain D instead of the
+//       file's `system`) until SIGINT or SIGTERM; when
 //       the environment names PRIME_READY_FD, writes "ready" to it once
 //       every component is built (its services served, its topics open);
 //   program --prime-check FILE --placement NAME [--param ...]

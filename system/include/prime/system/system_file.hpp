@@ -2,6 +2,7 @@
 
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -40,7 +41,7 @@ struct PlacementSpec {
 //   components:
 //     planner: {type: robot.planner, params: {gain: 2.0}}
 //   topics:
-//     sensors/lidar: {capacity: 16, overflow: drop_oldest}
+//     sensors/lidar: {capacity: 16, overflow: drop_oldest, expose: true}
 //   placements:
 //     one: {robot: [sensors, planner, driver]}
 //     split: {sensors: [sensors], planner: {components: [planner], restart: on_failure}, driver: [driver]}
@@ -52,6 +53,7 @@ struct SystemSpec {
   std::vector<Instance> instances{};
   std::map<std::string, int> instance_lines{};  // instance, and "instance.param" for each override
   std::map<std::string, Qos> topics{};
+  std::set<std::string> exposed{};  // topics published into the Shm domain whatever reads them
   std::map<std::string, std::string> redis{};  // per machine
   std::vector<PlacementSpec> placements{};
 

@@ -24,8 +24,8 @@ struct Links {
   Links& operator=(const Links&) = delete;
   ~Links() { stop(); }
 
-  // Loops first (they publish), then what feeds in-process ends from the
-  // media, then this process's own workers.
+  // Loops first (they publish), then the chains reading inputs (they may
+  // call services through a medium), then the media's workers.
   void stop();
 
   [[nodiscard]] unsigned reach(const std::string& name) const {
@@ -42,7 +42,7 @@ struct Links {
   }
 
   Plan plan;
-  liberty::Core local;  // in-process topics, chains and (without Shm) loops
+  liberty::Core local;  // in-process topics, the chains reading inputs, and (without Shm) loops
   std::unique_ptr<shm::Core> shm;          // when a link reaches another process of this machine
   std::unique_ptr<optimus::Core> optimus;  // when one reaches another machine
   std::mutex mutex;
