@@ -66,7 +66,7 @@ struct Phase {
 // The pid of the live process hosting the planner, as the domain lists it.
 std::optional<pid_t> planner_process(prime::shm::Core& shm) {
   for (const auto& p : shm.registry().participants)
-    if (p.alive && p.name.starts_with("planner (")) return static_cast<pid_t>(p.pid);
+    if (p.alive && (p.name == "planner" || p.name.starts_with("planner ("))) return static_cast<pid_t>(p.pid);
   return std::nullopt;
 }
 

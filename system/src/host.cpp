@@ -10,10 +10,15 @@ Links::Links(Plan p) : plan{std::move(p)} {
   unsigned reached = 0;
   for (const auto& [name, reach] : plan.reach) reached |= reach;
   if ((reached & Reach::same_machine) || plan.join_domain) {
-    // Listed by `prime ls` as the process and the components it hosts.
-    std::string participant = plan.process + " (";
-    for (std::size_t i = 0; i < plan.instances.size(); ++i) participant += (i ? ", " : "") + plan.instances[i].name;
-    participant += ")";
+    // Listed by `prime ls` as the process and the components it hosts:
+    // "robot (driver, sensors, planner)"; "planner" for a process named
+    // after the one component it hosts.
+    std::string participant = plan.process;
+    if (!(plan.instances.size() == 1 && plan.instances.front().name == plan.process)) {
+      participant += " (";
+      for (std::size_t i = 0; i < plan.instances.size(); ++i) participant += (i ? ", " : "") + plan.instances[i].name;
+      participant += ")";
+    }
     if (participant.size() > 47) participant = plan.process + " (" + std::to_string(plan.instances.size()) + " components)";
     shm = std::make_unique<shm::Core>(plan.shm_domain, shm::DomainOptions{.participant = participant});
   }
@@ -63,7 +68,7 @@ std::string param_problem(const Component& component, const Instance& instance) 
       const auto trigger = name.substr(0, name.size() - std::string_view{".period_ms"}.size());
       if (!component.trigger(trigger)) return where + ": no trigger '" + trigger + "' is declared";
       const auto* ms = std::get_if<std::int64_t>(&value);
-      if (!ms) return where + " is an integer (milliseconds), given a " + std::string{param_type_name(value.index())};
+      if (!ms) return where + " is an integer (milliseconds), given " + std::string{param_type_name(value.index())};
       if (*ms <= 0) return where + " must be positive, given " + std::to_string(*ms);
       continue;
     }
@@ -71,7 +76,7 @@ std::string param_problem(const Component& component, const Instance& instance) 
     if (!declared) return where + " is not declared";
     const bool number_from_integer = declared->value.index() == 2 && value.index() == 1;
     if (declared->value.index() != value.index() && !number_from_integer)
-      return where + " is a " + std::string{param_type_name(declared->value.index())} + ", given a " +
+      return where + " is " + std::string{param_type_name(declared->value.index())} + ", given " +
              std::string{param_type_name(value.index())};
   }
   return {};
@@ -88,7 +93,7 @@ Host::Host(Plan plan, const Registry& registry) {
     if (!names.insert(instance.name).second)
       throw Failure{{Errc::invalid_argument, "process '" + plan.process + "': instance '" + instance.name + "' is named twice"}};
     if (auto problem = param_problem(*component, instance); !problem.empty())
-      throw Failure{{problem.find(" is a ") != std::string::npos ? Errc::type_mismatch : Errc::invalid_argument, problem}};
+      throw Failure{{problem.find(", given ") != std::string::npos ? Errc::type_mismatch : Errc::invalid_argument, problem}};
     for (auto& [name, value] : instance.params)  // an integer given for a number
       if (const auto* declared = component->param(name); declared && declared->value.index() == 2)
         if (const auto* i = std::get_if<std::int64_t>(&value)) value = static_cast<double>(*i);

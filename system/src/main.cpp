@@ -24,6 +24,12 @@ std::string shown(const ParamValue& value) {
   }, value);
 }
 
+// "integer", of "an integer".
+std::string kind(const ParamValue& value) {
+  const auto name = param_type_name(value.index());
+  return std::string{name.substr(name.find(' ') + 1)};
+}
+
 void describe(const Registry& registry) {
   for (const auto* c : registry.components()) {
     std::printf("%s\n", c->type().c_str());
@@ -33,7 +39,7 @@ void describe(const Registry& registry) {
     for (const auto& t : c->triggers())
       std::printf("  every      %-24s %lld ms\n", t.name.c_str(), static_cast<long long>(t.period.count()));
     for (const auto& p : c->params())
-      std::printf("  param      %-24s %s = %s%s%s\n", p.name.c_str(), std::string{param_type_name(p.value.index())}.c_str(),
+      std::printf("  param      %-24s %s = %s%s%s\n", p.name.c_str(), kind(p.value).c_str(),
                   shown(p.value).c_str(), p.help.empty() ? "" : "  # ", p.help.c_str());
   }
 }

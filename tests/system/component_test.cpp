@@ -79,7 +79,7 @@ TEST(ComponentHarness, APortUsedAsItWasNotDeclaredIsRefusedByName) {
   const auto undeclared = sys::Component{"test.undeclared"}.build([](sys::Context& ctx) { (void)ctx.output<Count>("counts"); });
   EXPECT_TRUE(fails_with([&] { sys::Harness{undeclared}.start(); }, Errc::invalid_argument, "does not declare that it publishes 'counts'"));
   EXPECT_TRUE(fails_with([&] { sys::Harness(pipeline::doubler(), {{"factor", std::string{"two"}}}).start(); }, Errc::type_mismatch,
-                         "parameter 'factor' is a integer, given a string"));
+                         "parameter 'factor' is an integer, given a string"));
   EXPECT_TRUE(fails_with([&] { sys::Harness(pipeline::doubler(), {{"gain", 1.0}}).start(); }, Errc::invalid_argument,
                          "parameter 'gain' is not declared"));
 }
@@ -197,7 +197,7 @@ INSTANTIATE_TEST_SUITE_P(
         WrongSystem{"unknown_parameter", "components:\n  c:\n    type: test.counter\n    params: {speed: 3}\nplacements:\n  p: {a: [c]}\n",
                     ":4: component 'c' (test.counter): parameter 'speed' is not declared"},
         WrongSystem{"wrong_parameter_type", "components:\n  c:\n    type: test.counter\n    params:\n      limit: \"many\"\nplacements:\n  p: {a: [c]}\n",
-                    ":5: component 'c' (test.counter): parameter 'limit' is a integer, given a string"},
+                    ":5: component 'c' (test.counter): parameter 'limit' is an integer, given a string"},
         WrongSystem{"two_publishers",
                     "components:\n  a: {type: test.counter}\n  b: {type: test.counter}\nplacements:\n  p: {x: [a, b]}\n",
                     ":3: topic 'counts' has two publishers: 'a' and 'b'"},

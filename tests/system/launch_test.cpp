@@ -40,11 +40,11 @@ placements:
 };
 
 TEST_F(Launch, StartsEachProcessAfterWhatItCallsIsServedAndStopsThemAllOnCtrlC) {
-  write("  split:\n    checker: [checker]\n    counter: [counter]\n    doubler: {components: [doubler], restart: on_failure}\n");
+  write("  split:\n    checks: [checker]\n    counts: [counter]\n    doubles: {components: [doubler], restart: on_failure}\n");
   auto launcher = launch({"--placement", "split"});
-  // checker calls doubler's service: doubler starts before it.
-  ASSERT_TRUE(launcher.line_starting("launch  | placement 'split' of " + path_ + ": starting counter, doubler, checker", 20s));
-  for (const std::string name : {"counter", "doubler", "checker"}) {
+  // checker calls doubler's service: its process starts before checker's.
+  ASSERT_TRUE(launcher.line_starting("launch  | placement 'split' of " + path_ + ": starting counts, doubles, checks", 20s));
+  for (const std::string name : {"counts", "doubles", "checks"}) {
     ASSERT_TRUE(launcher.line_starting(std::string{name} + std::string(8 - std::string{name}.size(), ' ') + "| [prime] process '" +
                                        name + "' ready", 20s)) << name;
     ASSERT_TRUE(launcher.line_starting("launch  | '" + std::string{name} + "' is ready (pid ", 20s)) << name;
@@ -54,11 +54,11 @@ TEST_F(Launch, StartsEachProcessAfterWhatItCallsIsServedAndStopsThemAllOnCtrlC) 
   // prime ls shows each process with the components it hosts.
   const auto ls = prime::test::prime(domain_, {"ls"});
   EXPECT_EQ(ls.code, 0) << ls.out;
-  for (const std::string shown : {"counter (counter)", "doubler (doubler)", "checker (checker)"})
+  for (const std::string shown : {"counts (counter)", "doubles (doubler)", "checks (checker)"})
     EXPECT_NE(ls.out.find(shown), std::string::npos) << ls.out;
 
   // A process killed with kill -9 is restarted by its policy (on_failure).
-  const auto doubler = ls.out.find("doubler (doubler)");
+  const auto doubler = ls.out.find("doubles (doubler)");
   ASSERT_NE(doubler, std::string::npos);
   const auto pid_line = ls.out.substr(doubler, ls.out.find('\n', doubler) - doubler);
   pid_t pid = 0;
@@ -66,27 +66,32 @@ TEST_F(Launch, StartsEachProcessAfterWhatItCallsIsServedAndStopsThemAllOnCtrlC) 
     pid = pid * 10 + (pid_line[at] - '0');
   ASSERT_GT(pid, 0) << pid_line;
   ::kill(pid, SIGKILL);
-  EXPECT_TRUE(launcher.line_starting("launch  | 'doubler' was killed by signal 9 (Killed); restarting it in 500 ms (on_failure)", 20s));
-  EXPECT_TRUE(launcher.line_starting("launch  | 'doubler' restarted (pid ", 20s));
-  EXPECT_TRUE(launcher.line_starting("doubler | [prime] process 'doubler' ready", 20s));
+  EXPECT_TRUE(launcher.line_starting("launch  | 'doubles' was killed by signal 9 (Killed); restarting it in 500 ms (on_failure)", 20s));
+  EXPECT_TRUE(launcher.line_starting("launch  | 'doubles' restarted (pid ", 20s));
+  EXPECT_TRUE(launcher.line_starting("doubles | [prime] process 'doubles' ready", 20s));
 
   ::kill(launcher.pid(), SIGINT);
   EXPECT_TRUE(launcher.says("launch  | stopped", 20s));
   EXPECT_EQ(launcher.exit_code(20s), 0);
   const auto after = prime::test::prime(domain_, {"ls"});  // nobody is left in the domain
-  for (const std::string shown : {"counter (counter)", "doubler (doubler)", "checker (checker)"})
+  for (const std::string shown : {"counts (counter)", "doubles (doubler)", "checks (checker)"})
     EXPECT_EQ(after.out.find(shown), std::string::npos) << after.out;
 }
 
-TEST_F(Launch, AProcessThatEndsWithNoRestartEndsTheLaunchWithItsFailure) {
+TEST_F(Launch, AProcessThatFailsWithNoRestartMakesTheLaunchFail) {
   write("  p:\n    doubler: [doubler]\n    rest: [counter, checker]\n");
   auto launcher = launch();  // the first placement
   ASSERT_TRUE(launcher.says("launch  | every process is ready; Ctrl-C stops them", 20s));
   const auto ls = prime::test::prime(domain_, {"ls"});
-  const auto at = ls.out.find("rest (counter, checker)");
+  ASSERT_NE(ls.out.find("rest (counter, checker)"), std::string::npos) << ls.out;
+  const auto at = ls.out.find("\ndoubler ");  // a process named after its one component is listed by its name
   ASSERT_NE(at, std::string::npos) << ls.out;
-  ::kill(launcher.pid(), SIGTERM);
-  EXPECT_EQ(launcher.exit_code(20s), 0);
+  const pid_t pid = std::stoi(ls.out.substr(ls.out.find_first_of("0123456789", at)));
+  ::kill(pid, SIGKILL);
+  EXPECT_TRUE(launcher.line_starting("launch  | 'doubler' was killed by signal 9 (Killed); its restart policy is never", 20s));
+  ::kill(launcher.pid(), SIGTERM);  // the others stop cleanly; the launch reports the failure
+  EXPECT_TRUE(launcher.says("launch  | stopped, after a failure", 20s));
+  EXPECT_EQ(launcher.exit_code(20s), 1);
 }
 
 TEST_F(Launch, AWrongSystemIsRefusedBeforeAnythingStarts) {
@@ -104,7 +109,7 @@ TEST_F(Launch, AProcessThatFailsToStartStopsTheLaunch) {
   auto launcher = launch({"--param", "counter.limit=many"});  // a string for an integer
   const auto out = launcher.all_output(30s);
   EXPECT_EQ(launcher.exit_code(20s), 2) << out;
-  EXPECT_NE(out.find("parameter 'limit' is a integer, given a string"), std::string::npos) << out;
+  EXPECT_NE(out.find("parameter 'limit' is an integer, given a string"), std::string::npos) << out;
 }
 
 }  // namespace

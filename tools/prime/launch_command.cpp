@@ -367,7 +367,7 @@ int launch(const LaunchOptions& o) {
       throw std::invalid_argument{o.file + ":" + std::to_string(p.line) + ": process '" + p.name +
                                   "' has no executable (give one in the file, or --executable)"};
     if (o.executable.empty() && c.executable.find('/') != std::string::npos && std::filesystem::path{c.executable}.is_relative())
-      c.executable = (dir / c.executable).lexically_normal().string();  // beside the system file
+      c.executable = std::filesystem::absolute(dir / c.executable).lexically_normal().string();  // beside the system file
     children.push_back(std::move(c));
   }
 

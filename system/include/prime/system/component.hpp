@@ -54,8 +54,10 @@ struct Port {
 // A parameter's value: what a system file and a command line can give.
 using ParamValue = std::variant<bool, std::int64_t, double, std::string>;
 
+// The kind of a parameter's value, with its article: "a bool", "an integer",
+// "a number", "a string" (by the variant's index).
 constexpr std::string_view param_type_name(std::size_t index) noexcept {
-  constexpr std::string_view names[] = {"bool", "integer", "number", "string"};
+  constexpr std::string_view names[] = {"a bool", "an integer", "a number", "a string"};
   return index < 4 ? names[index] : "?";
 }
 

@@ -126,7 +126,7 @@ class Context {
                    std::conditional_t<std::is_integral_v<V>, std::int64_t,
                    std::conditional_t<std::is_floating_point_v<V>, double, std::string>>>;
     if (const auto* v = std::get_if<Stored>(&value)) return static_cast<V>(*v);
-    detail::refuse(Errc::type_mismatch, where() + ": parameter '" + name + "' is a " +
+    detail::refuse(Errc::type_mismatch, where() + ": parameter '" + name + "' is " +
                                             std::string{param_type_name(value.index())} + ", read as another type");
   }
 
