@@ -305,6 +305,27 @@ std::string optimus_table(const Results& r) {
   return out.str();
 }
 
+// Components (the system suite): sensor to command per placement, and the
+// layer's cost against the same pipeline wired by hand in the same run.
+std::string components_table(const Results& r) {
+  const auto hand = r.find("ShmHandWired", "sensor-to-command-split", 0, "p50");
+  if (!hand && !r.find("Components", "sensor-to-command-split", 0, "p50")) return "No figures.\n";
+  std::ostringstream out;
+  out << "| placement | links | p50 | p99 | against the hand-wired pipeline (p50) |\n|---|---|---:|---:|---|\n";
+  const auto row = [&](const std::string& who, const std::string& placement, const std::string& what, const std::string& links) {
+    const auto p50 = r.find(who, "sensor-to-command-" + placement, 0, "p50");
+    if (!p50) return;
+    const auto p99 = r.find(who, "sensor-to-command-" + placement, 0, "p99");
+    out << "| " << what << " | " << links << " | " << time_text(*p50) << " | " << (p99 ? time_text(*p99) : "–") << " | "
+        << (who == "ShmHandWired" ? "1×" : ratio_text(divide(p50, hand))) << " |\n";
+  };
+  row("ShmHandWired", "split", "hand-wired (no components), planner in its own process", "Shm");
+  row("Components", "split", "components, `split`: planner in its own process", "Shm");
+  row("Components", "one", "components, `one`: all in one process", "in-process");
+  row("Components", "machines", "components, `machines`: planner on another \"machine\"", "Optimus (Redis on loopback)");
+  return out.str();
+}
+
 // The paper's two tests: availability per request period and extra
 // clients, and response times with their outliers, per payload.
 // prime record and prime play (the record suite), against the MCAP
@@ -720,6 +741,12 @@ Written write_report(const std::filesystem::path& dir, const Results& results, c
         "write() of 1 MiB blocks into the same folder from the recorder's CPUs, nothing else done (what `dd bs=1M` "
         "does).\n\n"
      << recording_table(results) << '\n';
+  md << "## Components: sensor to command, per placement\n\n"
+     << "A sensor publishes a stamped reading; a planner makes a command of each as it arrives and calls the driver's "
+        "service; the time is the driver's clock less the reading's stamp, one reading in flight. The benchmark's "
+        "process hosts the sensor and the driver; the planner is where the placement puts it. The hand-wired row is "
+        "the same pipeline written with `shm::Core` directly (the robot demo before components), in the same run.\n\n"
+     << components_table(results) << '\n';
   if (!results.notes.empty()) {
     md << "## Notes\n\n";
     for (const auto& note : results.notes) md << "- " << note << '\n';

@@ -96,7 +96,8 @@ inline bool is_floor(const std::string& who) {
   return who == "Floor" || who == "FutexWake" || who.starts_with("Spsc") || who == "Cyclictest" || who == "FileWrite";
 }
 inline bool is_prime(const std::string& who) {
-  return who.starts_with("Shm") || who == "Optimus" || who == "Radiant" || who == "Liberty" || who.starts_with("Sources");
+  return who.starts_with("Shm") || who == "Optimus" || who == "Radiant" || who == "Liberty" || who.starts_with("Sources") ||
+         who == "Components";
 }
 inline bool is_peer(const std::string& who) { return !is_floor(who) && !is_prime(who); }
 

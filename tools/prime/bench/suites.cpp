@@ -244,6 +244,21 @@ const double* number(const Json& object, const std::string& key) {
   return &std::get<double>(it->second.value);
 }
 
+// prime_system_bench: BM_SensorToCommand_<HandWired|One|Split|Machines>:
+// ShmHandWired, or Components in scenario sensor-to-command-<placement>.
+void read_system(const Json& run, Results& out) {
+  const auto parts = name_parts(run);
+  const std::string prefix = "SensorToCommand_";
+  if (parts.empty() || !parts[0].starts_with(prefix)) return;
+  std::string placement = parts[0].substr(prefix.size());
+  const bool hand = placement == "HandWired";
+  const std::string who = hand ? "ShmHandWired" : "Components";
+  std::transform(placement.begin(), placement.end(), placement.begin(), [](unsigned char c) { return std::tolower(c); });
+  const std::string scenario = "sensor-to-command-" + (hand ? std::string{"split"} : placement);
+  if (const double* v = number(run, "p50_ns")) out.figures.push_back({who, scenario, 0, "p50", *v, "ns"});
+  if (const double* v = number(run, "p99_ns")) out.figures.push_back({who, scenario, 0, "p99", *v, "ns"});
+}
+
 std::vector<Suite> suites() {
   return {
       {.name = "ipc",
@@ -308,6 +323,14 @@ std::vector<Suite> suites() {
        .full_repetitions = 3,
        .quick_env = {{"PRIME_RECORD_SECONDS", "0.3"}},
        .read = read_record},
+      {.name = "system",
+       .title = "components: sensor to command in each placement, against the pipeline wired by hand",
+       .binary = "system/prime_system_bench",
+       .quick_filter = "HandWired|Split|One",
+       .quick_min_time = 0.05,
+       .full_min_time = 0.5,
+       .full_repetitions = 3,
+       .read = read_system},
   };
 }
 
