@@ -46,16 +46,19 @@ Registry& Registry::global() {
 
 void Registry::add(Component component) {
   const auto type = component.type();
+  std::scoped_lock lock{mutex_};
   if (!components_.emplace(type, std::move(component)).second)
     throw Failure{{Errc::in_use, "component '" + type + "' is registered twice"}};
 }
 
 const Component* Registry::find(std::string_view type) const {
+  std::scoped_lock lock{mutex_};
   const auto found = components_.find(type);
   return found == components_.end() ? nullptr : &found->second;
 }
 
 std::vector<const Component*> Registry::components() const {
+  std::scoped_lock lock{mutex_};
   std::vector<const Component*> all;
   for (const auto& [type, component] : components_) all.push_back(&component);
   return all;

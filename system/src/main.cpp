@@ -103,6 +103,7 @@ int run(int argc, char** argv) {
   try {
     auto system = load_system(file, overrides);
     if (!domain.empty()) system.domain = domain;
+    load_libraries(system);
     if (mode == Mode::check) {
       const auto found = problems(system, registry, placement, true);
       for (const auto& p : found) std::fprintf(stderr, "%s\n", p.c_str());

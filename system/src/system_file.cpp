@@ -1,8 +1,10 @@
 #include "prime/system/system_file.hpp"
 
+#include <dlfcn.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <set>
 
 namespace prime::system {
@@ -128,11 +130,16 @@ SystemSpec load_system(const std::string& path, const std::vector<std::string>& 
     r.fail(e.mark.line + 1, "not YAML: " + e.msg);
   }
   if (!root.IsMap()) r.fail(root, "a system file is a map (system, components, topics, machines, placements)");
-  r.known_keys(root, {"system", "executable", "namespace", "machines", "components", "topics", "placements"}, "the system file");
+  r.known_keys(root, {"system", "executable", "namespace", "libraries", "machines", "components", "topics", "placements"},
+               "the system file");
   SystemSpec system{.file = path};
   if (root["system"]) system.domain = r.text(root["system"], "system");
   if (root["executable"]) system.executable = r.text(root["executable"], "executable");
   if (root["namespace"]) system.ns = r.text(root["namespace"], "namespace");
+  if (const auto libraries = root["libraries"]) {
+    if (!libraries.IsSequence()) r.fail(libraries, "libraries must be a list");
+    for (const auto& library : libraries) system.libraries.emplace_back(r.text(library, "a library"), Reader::line(library));
+  }
   if (const auto machines = root["machines"]) {
     r.expect_map(machines, "machines");
     for (const auto& entry : machines) {
@@ -202,6 +209,20 @@ SystemSpec load_system(const std::string& path, const std::vector<std::string>& 
     instance->params[key] = value.IsScalar() ? r.param(value, "override '" + o + "'") : ParamValue{o.substr(equals + 1)};
   }
   return system;
+}
+
+void load_libraries(const SystemSpec& system) {
+  const auto dir = std::filesystem::path{system.file}.parent_path();
+  for (const auto& [name, line] : system.libraries) {
+    // A name with a slash is a path (beside the file when relative); one
+    // without is looked up as dlopen does (LD_LIBRARY_PATH, the cache).
+    const auto path = name.find('/') == std::string::npos ? name : std::filesystem::absolute(dir / name).lexically_normal().string();
+    if (!::dlopen(path.c_str(), RTLD_NOW | RTLD_GLOBAL)) {
+      const char* why = ::dlerror();
+      throw Failure{{Errc::not_found, system.file + ":" + std::to_string(line) + ": the library of components '" + name +
+                                          "' cannot be loaded: " + (why ? why : "dlopen failed")}};
+    }
+  }
 }
 
 namespace {

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "pipeline.hpp"
 #include "shm/domain.hpp"
 #include "shm/peer_process.hpp"
 #include "tool_runs.hpp"
@@ -92,6 +93,38 @@ TEST_F(Launch, AProcessThatFailsWithNoRestartMakesTheLaunchFail) {
   ::kill(launcher.pid(), SIGTERM);  // the others stop cleanly; the launch reports the failure
   EXPECT_TRUE(launcher.says("launch  | stopped, after a failure", 20s));
   EXPECT_EQ(launcher.exit_code(20s), 1);
+}
+
+TEST_F(Launch, LoadsComponentsFromTheLibrariesTheSystemFileLists) {
+  std::ofstream{path_} << "system: " << domain_ << "\nlibraries: [\"" << COMPONENTS_LIBRARY << R"("]
+components:
+  counter: {type: test.counter, params: {limit: 1000000}}
+  echo: {type: test.library_echo}
+placements:
+  p: {counter: [counter], echoing: [echo]}
+)";
+  prime::shm::Core shm{domain_, {.participant = "test"}};
+  auto echoed = shm.subscribe<pipeline::Count>("echoed", {}, {.capacity = 256, .overflow = prime::Overflow::block}).subscribe();
+  auto launcher = launch();
+  ASSERT_TRUE(launcher.says("launch  | every process is ready; Ctrl-C stops them", 20s));
+  // The library's component, in its own process, echoes the counter's counts.
+  auto first = echoed.read_for(10s);
+  ASSERT_TRUE(first) << first.error().describe();
+  EXPECT_GT(first->value->n, 1000);
+  auto next = echoed.read_for(10s);
+  ASSERT_TRUE(next) << next.error().describe();
+  EXPECT_EQ(next->value->n, first->value->n + 1);
+  ::kill(launcher.pid(), SIGINT);
+  EXPECT_EQ(launcher.exit_code(20s), 0);
+}
+
+TEST_F(Launch, ALibraryThatCannotBeLoadedIsRefusedByLine) {
+  std::ofstream{path_} << "system: " << domain_ << "\nlibraries:\n  - ./no_such_library.so\ncomponents:\n  c: {type: test.counter}\n"
+                       << "placements:\n  p: {x: [c]}\n";
+  auto launcher = launch();
+  const auto out = launcher.all_output(30s);
+  EXPECT_EQ(launcher.exit_code(20s), 2) << out;
+  EXPECT_NE(out.find(path_ + ":3: the library of components './no_such_library.so' cannot be loaded"), std::string::npos) << out;
 }
 
 TEST_F(Launch, AWrongSystemIsRefusedBeforeAnythingStarts) {

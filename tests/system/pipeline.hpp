@@ -24,6 +24,7 @@ using namespace std::chrono_literals;
 struct Count {
   std::int64_t n;
 };
+PRIME_DESCRIBE(Count, n)
 
 inline prime::system::Component counter() {
   return prime::system::Component{"test.counter"}

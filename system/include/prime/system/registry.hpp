@@ -1,6 +1,7 @@
 #pragma once
 
 #include <map>
+#include <mutex>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -24,7 +25,8 @@ class Registry {
   [[nodiscard]] std::vector<const Component*> components() const;
 
  private:
-  std::map<std::string, Component, std::less<>> components_;
+  mutable std::mutex mutex_;
+  std::map<std::string, Component, std::less<>> components_;  // never erased: pointers into it stay valid
 };
 
 }  // namespace prime::system

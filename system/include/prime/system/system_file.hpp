@@ -37,6 +37,7 @@ struct PlacementSpec {
 //
 //   system: robot                  # the Shm domain and Optimus key prefix
 //   executable: ./robot            # what each process runs (beside this file)
+//   libraries: [./libarm.so]       # components a program loads (beside this file)
 //   machines: {base: {redis: tcp://10.0.0.2:6379}}
 //   components:
 //     planner: {type: robot.planner, params: {gain: 2.0}}
@@ -50,6 +51,9 @@ struct SystemSpec {
   std::string domain = "prime";
   std::string executable{};
   std::string ns{};
+  // Shared libraries of components a hosting program loads before it
+  // checks or hosts (beside the file when relative), with their lines.
+  std::vector<std::pair<std::string, int>> libraries{};
   std::vector<Instance> instances{};
   std::map<std::string, int> instance_lines{};  // instance, and "instance.param" for each override
   std::map<std::string, Qos> topics{};
@@ -77,6 +81,12 @@ SystemSpec load_system(const std::string& path, const std::vector<std::string>& 
 // are left out rather than refused (a program that hosts only some).
 std::vector<std::string> problems(const SystemSpec& system, const Registry& registry, std::string_view placement,
                                   bool only_known = false);
+
+// Loads the system's libraries of components (dlopen), so that their
+// PRIME_COMPONENT registrations join the program's registry. Throws
+// Failure (Errc::not_found) naming the file, the line and why one cannot
+// be loaded.
+void load_libraries(const SystemSpec& system);
 
 // The processes of `placement` in the order to start them: each after the
 // processes serving what it calls (as listed, otherwise).
