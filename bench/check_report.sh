@@ -19,7 +19,8 @@ for row in "Floor,latency,64,p50," "Shm,latency,64,p50," "Shm,latency,64,p99.9,"
            "For,table1-1lane,100,per hop," "Liberty,table1-1lane,100,per hop," \
            "Shm,fanout-throughput-1,64,rate," "Shm,fanout-publish-4,64,publish," \
            "ShmBatch,publisher-alone,64,rate," "ShmRecorder,record-flat,64,rate," "ShmRecorder,record-paced-100000-64,64,lost," \
-           "ShmPlay,play-timing,0,p99,"; do
+           "ShmPlay,play-timing,0,p99," "ShmHandWired,sensor-to-command-split,0,p50," \
+           "Components,sensor-to-command-split,0,p50," "Components,sensor-to-command-one,0,p50,"; do
   grep -q "^$row" "$csv" || fail "figures.csv lacks $row"
 done
 if command -v redis-server >/dev/null; then
@@ -38,6 +39,7 @@ if command -v cyclictest >/dev/null && command -v stress-ng >/dev/null; then
 else
   grep -q "^- loop: .* is not installed" "$out/summary.md" || fail "the loop suite was neither run nor listed as skipped"
 fi
+grep -q "^## Components: sensor to command" "$out/summary.md" || fail "summary.md has no components section"
 grep -q "^## Headline" "$out/summary.md" || fail "summary.md has no headline"
 grep -q "| Shm one-way latency, 64 B, p50 |" "$out/summary.md" || fail "the headline lacks Shm's latency"
 grep -q "Measured .* CPUs" "$out/summary.md" || fail "summary.md does not say which machine"
