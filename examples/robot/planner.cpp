@@ -24,14 +24,14 @@ prime::system::Component planner() {
   return prime::system::Component{"robot.planner"}
       .subscribes<Scan>("sensors/lidar", {.capacity = 16})
       .subscribes<Odometry>("sensors/odom", {.capacity = 32})
+      .syncs<Scan, Odometry>("sensed", {"sensors/lidar", "sensors/odom"}, prime::approximate_time({.min_interval = {15ms, 5ms}}))
       .calls<MotorCommand, Applied>("driver/command", {.timeout = 50ms, .wait_for_service = 5s})
       .every("control", 20ms)
       .every("report", 1000ms)
       .param("on_each_pair", false, "run the chain on each synchronised pair instead of in the 50 Hz loop")
       .build([](prime::system::Context& ctx) {
         auto& local = ctx.local();
-        auto sets = prime::sync(prime::approximate_time({.min_interval = {15ms, 5ms}}), ctx.input<Scan>("sensors/lidar"),
-                                ctx.input<Odometry>("sensors/odom"));
+        auto sets = ctx.synced<Scan, Odometry>("sensed");
         auto step = local.chain(localize<Sensed>, "localize") | local.chain(plan, "plan") | local.chain(control, "control");
         struct Counts {
           std::atomic<std::uint64_t> sent = 0, waiting = 0;

@@ -36,6 +36,11 @@ void describe(const Registry& registry) {
     for (const auto& p : c->ports())
       std::printf("  %-10s %-24s %s%s\n", std::string{to_string(p.kind)}.c_str(), p.name.c_str(), p.message.describe().c_str(),
                   p.reply ? (" -> " + p.reply->describe()).c_str() : "");
+    for (const auto& set : c->synced_sets()) {
+      std::string topics;
+      for (const auto& t : set.topics) topics += (topics.empty() ? "" : " + ") + t;
+      std::printf("  syncs      %-24s %s\n", set.name.c_str(), topics.c_str());
+    }
     for (const auto& t : c->triggers())
       std::printf("  every      %-24s %lld ms\n", t.name.c_str(), static_cast<long long>(t.period.count()));
     for (const auto& p : c->params())

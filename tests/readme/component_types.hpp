@@ -13,6 +13,9 @@ using namespace std::chrono_literals;
 struct Scan {
   float ranges[4];
 };
+struct Odometry {
+  double speed, turn_rate;
+};
 struct Pose {
   double x, y, heading;
 };
@@ -25,3 +28,4 @@ struct Applied {
 
 inline Pose localize(const Scan&) { return {}; }
 inline Command control(const Pose&) { return {}; }
+inline Pose fuse(const Scan&, const Odometry&) { return {}; }

@@ -84,6 +84,54 @@ TEST(ComponentHarness, APortUsedAsItWasNotDeclaredIsRefusedByName) {
                          "parameter 'gain' is not declared"));
 }
 
+// Two topics of counts met by stamp in a declared synchronised set; the sum
+// of each pair goes out with the pair's stamp.
+sys::Component pairer() {
+  return sys::Component{"test.pairer"}
+      .subscribes<Count>("left", {.capacity = 64})
+      .syncs<Count, Count>("pair", {"left", "right"}, prime::exact_time, {.capacity = 64})
+      .publishes<Count>("sums")
+      .build([](sys::Context& ctx) {
+        auto sums = ctx.output<Count>("sums");
+        prime::forward(ctx.synced<Count, Count>("pair"),
+                       [sums](const prime::Synced<Count, Count>& set, prime::Clock::time_point stamp) {
+                         (void)sums.publish(Count{std::get<0>(set).n + std::get<1>(set).n}, stamp);
+                       });
+      });
+}
+
+TEST(ComponentHarness, ASynchronisedSetPairsItsTopicsByStamp) {
+  sys::Harness h{pairer()};
+  auto left = h.feed<Count>("left");
+  auto right = h.feed<Count>("right");
+  auto sums = h.probe<Count>("sums");
+  h.start();
+  const auto at = [](std::int64_t n) { return prime::Clock::time_point{std::chrono::seconds{n}}; };
+  for (std::int64_t n : {1, 2, 4, 5}) ASSERT_TRUE(left.publish(Count{n}, at(n)));
+  for (std::int64_t n : {1, 2, 3, 4, 5}) ASSERT_TRUE(right.publish(Count{10 * n}, at(n)));  // 3 has no partner
+  for (std::int64_t n : {1, 2, 4, 5}) {
+    auto got = sums.read_for(5s);
+    ASSERT_TRUE(got) << got.error().describe();
+    EXPECT_EQ(got->value.n, 11 * n);
+    EXPECT_EQ(got->stamp, at(n));
+  }
+  h.stop();
+  EXPECT_FALSE(sums.try_read());  // the unmatched count made no set
+}
+
+TEST(ComponentHarness, ASynchronisedSetUsedAsItWasNotDeclaredIsRefused) {
+  const auto other_types = sys::Component{"test.other_types"}
+                               .syncs<Count, Count>("pair", {"left", "right"}, prime::exact_time)
+                               .build([](sys::Context& ctx) { (void)ctx.synced<Count, double>("pair"); });
+  EXPECT_TRUE(fails_with([&] { sys::Harness{other_types}.start(); }, Errc::type_mismatch,
+                         "synchronised set 'pair' is declared as ("));
+  const auto undeclared = sys::Component{"test.no_set"}.build([](sys::Context& ctx) { (void)ctx.synced<Count, Count>("pair"); });
+  EXPECT_TRUE(fails_with([&] { sys::Harness{undeclared}.start(); }, Errc::invalid_argument, "declares no synchronised set 'pair'"));
+  // A topic synchronised as another type than it is subscribed to as: the declaration's own mistake.
+  EXPECT_TRUE(fails_with([] { (void)sys::Component{"test.both"}.subscribes<Count>("left").syncs<double, Count>("pair", {"left", "right"}, prime::exact_time); },
+                         Errc::type_mismatch, "'left' is subscribed to as"));
+}
+
 // A system file written for one test, removed after it.
 class SystemFile : public ::testing::Test {
  protected:

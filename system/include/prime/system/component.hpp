@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -10,7 +11,9 @@
 #include <vector>
 
 #include "prime/common/fingerprint.hpp"
+#include "prime/logic/error.hpp"
 #include "prime/topology/qos.hpp"
+#include "prime/topology/sync.hpp"
 
 namespace prime::system {
 
@@ -74,6 +77,15 @@ struct Trigger {
   std::chrono::milliseconds period;
 };
 
+// A synchronised set: topics the component subscribes to, read together as
+// one source of Synced tuples put together by `policy` (Context::synced).
+struct SyncedSet {
+  std::string name;
+  std::vector<std::string> topics;
+  std::vector<Fingerprint> messages;  // each topic's type, in order
+  SyncPolicy policy;
+};
+
 // A component: plain functions and chains, with its ports, parameters and
 // triggers declared as data. It names no medium: where each port leads is
 // the placement's choice, made by the host (Host) that builds it.
@@ -81,6 +93,7 @@ struct Trigger {
 //   const auto planner = prime::system::Component{"planner"}
 //       .subscribes<Scan>("sensors/lidar", {.capacity = 16})
 //       .calls<MotorCommand, Applied>("driver/command")
+//       .syncs<Scan, Odometry>("sensed", {"sensors/lidar", "sensors/odom"}, prime::approximate_time())
 //       .every("control", 20ms)
 //       .param("gain", 2.0, "turn rate per radian of heading error")
 //       .build([](prime::system::Context& ctx) { ... });
@@ -101,6 +114,17 @@ class Component {
   template <class T>
   Component subscribes(std::string name, Qos qos = {}) && {
     return std::move(*this).add(topic<T>(PortKind::subscribes, std::move(name), qos));
+  }
+  // A synchronised set of topics, each of which the component subscribes
+  // to (with `qos`, unless it declared the topic before with its own).
+  template <class... T>
+    requires(sizeof...(T) >= 2)
+  Component syncs(std::string name, std::array<std::string, sizeof...(T)> topics, SyncPolicy policy, Qos qos = {}) && {
+    SyncedSet set{std::move(name), {topics.begin(), topics.end()}, {Fingerprint::of<T>()...}, policy};
+    std::size_t i = 0;
+    ((declare_subscription<T>(topics[i++], qos)), ...);
+    sets_.push_back(std::move(set));
+    return std::move(*this);
   }
   template <class In, class Out>
   Component serves(std::string name) && {
@@ -131,6 +155,7 @@ class Component {
   [[nodiscard]] const std::vector<Port>& ports() const noexcept { return ports_; }
   [[nodiscard]] const std::vector<Param>& params() const noexcept { return params_; }
   [[nodiscard]] const std::vector<Trigger>& triggers() const noexcept { return triggers_; }
+  [[nodiscard]] const std::vector<SyncedSet>& synced_sets() const noexcept { return sets_; }
   [[nodiscard]] const Build& builder() const noexcept { return build_; }
 
   [[nodiscard]] const Port* port(std::string_view name, PortKind kind) const noexcept {
@@ -141,6 +166,11 @@ class Component {
   [[nodiscard]] const Param* param(std::string_view name) const noexcept {
     for (const auto& p : params_)
       if (p.name == name) return &p;
+    return nullptr;
+  }
+  [[nodiscard]] const SyncedSet* synced_set(std::string_view name) const noexcept {
+    for (const auto& s : sets_)
+      if (s.name == name) return &s;
     return nullptr;
   }
   [[nodiscard]] const Trigger* trigger(std::string_view name) const noexcept {
@@ -167,6 +197,19 @@ class Component {
     return {kind, std::move(name), Fingerprint::of<In>(), Fingerprint::of<Out>(), {}, {},
             std::is_trivially_copyable_v<In> && std::is_trivially_copyable_v<Out>};
   }
+  // A topic of a synchronised set: declared here unless it was already, as
+  // the same type (another type is the component's own mistake).
+  template <class T>
+  void declare_subscription(const std::string& name, const Qos& qos) {
+    if (const auto* declared = port(name, PortKind::subscribes)) {
+      if (!(declared->message == Fingerprint::of<T>()))
+        throw Failure{{Errc::type_mismatch, "component '" + type_ + "': '" + name + "' is subscribed to as " +
+                                                declared->message.describe() + " and synchronised as " +
+                                                Fingerprint::of<T>().describe()}};
+      return;
+    }
+    ports_.push_back(topic<T>(PortKind::subscribes, name, qos));
+  }
   Component add(Port port) && {
     ports_.push_back(std::move(port));
     return std::move(*this);
@@ -176,6 +219,7 @@ class Component {
   std::vector<Port> ports_;
   std::vector<Param> params_;
   std::vector<Trigger> triggers_;
+  std::vector<SyncedSet> sets_;
   Build build_;
 };
 

@@ -185,6 +185,26 @@ class Context {
     return Input<T>{port, reader_qos, links_.local.runtime(), Graph::node(port, "source", medium), std::move(open)};
   }
 
+  // The declared synchronised set `name`: a source of Synced<T...>, one
+  // value of each of its topics per set, as its policy puts them together
+  // (prime::sync over this component's inputs of them).
+  template <class... T>
+  [[nodiscard]] auto synced(const std::string& name) {
+    const auto* set = component_.synced_set(name);
+    if (!set) detail::refuse(Errc::invalid_argument, where() + ": it declares no synchronised set '" + name + "'");
+    const std::vector<Fingerprint> used{Fingerprint::of<T>()...};
+    if (used != set->messages) {
+      std::string declared, as;
+      for (const auto& f : set->messages) declared += (declared.empty() ? "" : ", ") + f.describe();
+      for (const auto& f : used) as += (as.empty() ? "" : ", ") + f.describe();
+      detail::refuse(Errc::type_mismatch, where() + ": synchronised set '" + name + "' is declared as (" + declared +
+                                              "), used as (" + as + ")");
+    }
+    return [&]<std::size_t... I>(std::index_sequence<I...>) {
+      return prime::sync(set->policy, input<T>(set->topics[I])...);
+    }(std::index_sequence_for<T...>{});
+  }
+
   // Serves `block` (any callable or chain taking `const In&`, giving Out)
   // as the service `port`: called directly by clients in this process, and
   // through Shm or Optimus by those elsewhere. What it throws is the
