@@ -3,7 +3,8 @@
 // A small system for the placement tests: a counter publishes 1..limit
 // from a periodic trigger; a doubler publishes each count times its factor
 // and serves "triple"; a checker calls "triple" on each doubled value and
-// keeps what it got. Registered by the test and by system_peer alike.
+// keeps what it got, and publishes it on "checked" (which nobody in the
+// system reads, so it is in the Shm domain for a test outside). Registered by the test and by system_peer alike.
 
 #include <atomic>
 #include <condition_variable>
@@ -63,6 +64,7 @@ struct Seen {
   std::int64_t doubled, tripled;
   bool operator==(const Seen&) const = default;
 };
+PRIME_DESCRIBE(Seen, doubled, tripled)
 struct Observed {
   std::mutex mutex;
   std::condition_variable changed;
@@ -90,9 +92,11 @@ inline prime::system::Component checker() {
   return prime::system::Component{"test.checker"}
       .subscribes<Count>("doubled", {.capacity = 256})
       .calls<Count, Count>("triple", {.timeout = 2s, .wait_for_service = 5s})
+      .publishes<Seen>("checked", {.capacity = 1024})
       .build([](prime::system::Context& ctx) {
         auto triple = ctx.client<Count, Count>("triple");
-        prime::forward(ctx.input<Count>("doubled"), [triple](const Count& c, prime::Clock::time_point) {
+        auto checked = ctx.output<Seen>("checked");
+        prime::forward(ctx.input<Count>("doubled"), [triple, checked](const Count& c, prime::Clock::time_point) {
           auto answer = triple.call(c);
           auto& o = observed();
           {
@@ -101,6 +105,7 @@ inline prime::system::Component checker() {
             else o.errors.push_back(answer.error().describe());
           }
           o.changed.notify_all();
+          if (answer) (void)checked.publish(Seen{c.n, answer->n});
         });
       });
 }
