@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdint>
 
+#include "prime/record/replay.hpp"
 #include "prime/system.hpp"
 #include "prime/topology/forward.hpp"
 

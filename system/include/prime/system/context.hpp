@@ -160,7 +160,10 @@ class Context {
     const auto reader_qos = declared.qos;
     typename Input<T>::Open open;
     std::string medium = "local";
-    if (reach & Reach::here) {
+    if (const auto fed = fed_input<T>(port)) {
+      open = *fed;
+      medium = "fed";
+    } else if (reach & Reach::here) {
       open = [local = hub<T>(port, links_.topic_qos(port, declared.qos))](const Qos& qos) { return local.subscribe(qos); };
     } else if (reach & Reach::same_machine) {
       if constexpr (detail::Crosses<T>) {
@@ -339,6 +342,15 @@ class Context {
     detail::refuse(Errc::type_mismatch, where() + ": '" + port + "' is carried in this process with another type");
   }
 
+  // The input's source when the host's owner gives it (a test playing a recording).
+  template <class T>
+  std::optional<typename Input<T>::Open> fed_input(const std::string& port) {
+    std::scoped_lock lock{links_.mutex};
+    const auto found = links_.fed.find(port);
+    if (found == links_.fed.end()) return std::nullopt;
+    return typed<typename Input<T>::Open>(found->second, port);
+  }
+
   // The in-process end of the topic: made by whichever of its ends comes first.
   template <class T>
   LocalSource<T> hub(const std::string& port, const Qos& qos) {
@@ -353,6 +365,8 @@ class Context {
   static shm::TopicQos shm_qos(const Qos& qos) {
     return {.capacity = qos.capacity, .overflow = qos.overflow, .block_timeout = qos.block_timeout};
   }
+
+  friend class Harness;  // gives inputs their sources (feed_from)
 
   const Component& component_;
   const Instance& instance_;

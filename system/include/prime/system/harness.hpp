@@ -25,6 +25,7 @@ namespace prime::system {
 //   auto commands = h.probe<Command>("planner/command");   // what it publishes
 //   h.serve<Command, Applied>("driver/command", [](const Command&) { return Applied{true}; });
 //   auto reset = h.caller<Reset, Done>("planner/reset");    // a service it serves
+//   h.feed_from("sensors/odom", replay.source<Odometry>("sensors/odom"));  // or any source: a recording
 //   h.start();
 //   scans.publish(scan);
 //   auto got = commands.read_for(1s);
@@ -81,6 +82,18 @@ class Harness {
     tester_ = std::move(tester_).template publishes<T>(port);
     steps_.push_back([port, out = feed.output_](Context& ctx) { out->emplace(ctx.output<T>(port)); });
     return feed;
+  }
+  // Values of a port the component subscribes to taken from `source`, any
+  // Source of T, in the component's own threads: a recording, say
+  // (prime::record::Replay's sources, played once start() returns).
+  template <class S>
+  void feed_from(const std::string& port, S source) {
+    using T = typename S::value_type;
+    typename Input<T>::Open open = [source = std::move(source)](const Qos&) { return source.subscribe(); };
+    steps_.push_back([port, open = std::move(open)](Context& ctx) {
+      std::scoped_lock lock{ctx.links_.mutex};
+      ctx.links_.fed.emplace(port, open);
+    });
   }
   template <class T>
   Probe<T> probe(const std::string& port, Qos qos = {.capacity = 1024}) {
