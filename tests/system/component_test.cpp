@@ -2,8 +2,12 @@
 // the components, with no process started.
 #include <gtest/gtest.h>
 
-#include <fstream>
+#include <condition_variable>
 #include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
 
 #include "pipeline.hpp"
 #include "support/failure.hpp"
@@ -130,6 +134,60 @@ TEST(ComponentHarness, ASynchronisedSetUsedAsItWasNotDeclaredIsRefused) {
   // A topic synchronised as another type than it is subscribed to as: the declaration's own mistake.
   EXPECT_TRUE(fails_with([] { (void)sys::Component{"test.both"}.subscribes<Count>("left").syncs<double, Count>("pair", {"left", "right"}, prime::exact_time); },
                          Errc::type_mismatch, "'left' is subscribed to as"));
+}
+
+// Readers that share each count: what each instance was given, kept alive.
+struct Shared {
+  std::mutex mutex;
+  std::condition_variable came;
+  std::map<std::string, std::vector<std::shared_ptr<const Count>>> kept;
+};
+Shared& shared() {
+  static Shared s;
+  return s;
+}
+// With `share`, it reads the counts shared; without, as values of its own.
+sys::Component sharer() {
+  return sys::Component{"test.sharer"}
+      .subscribes<Count>("counts", {.capacity = 64})
+      .param("share", true)
+      .build([](sys::Context& ctx) {
+        const auto keep = [name = ctx.name()](std::shared_ptr<const Count> count) {
+          auto& s = shared();
+          {
+            std::scoped_lock lock{s.mutex};
+            s.kept[name].push_back(std::move(count));
+          }
+          s.came.notify_all();
+        };
+        if (ctx.param<bool>("share"))
+          prime::forward(ctx.shared_input<Count>("counts"),
+                         [keep](const std::shared_ptr<const Count>& count, prime::Clock::time_point) { keep(count); });
+        else
+          prime::forward(ctx.input<Count>("counts"),
+                         [keep](const Count& count, prime::Clock::time_point) { keep(std::make_shared<const Count>(count)); });
+      });
+}
+
+TEST(InProcessLinks, ReadersThatShareAValueAreGivenTheSameOneAndReadersOfValuesTheirOwn) {
+  sys::Registry registry;
+  registry.add(pipeline::counter());
+  registry.add(sharer());
+  sys::Host host{{.process = "all",
+                  .instances = {{"a", "test.sharer"},
+                                {"b", "test.sharer"},
+                                {"own", "test.sharer", {{"share", false}}},
+                                {"c", "test.counter", {{"limit", std::int64_t{20}}, {"tick.period_ms", std::int64_t{1}}}}}},
+                 registry};
+  auto& s = shared();
+  std::unique_lock lock{s.mutex};
+  ASSERT_TRUE(s.came.wait_for(lock, 10s, [&] { return s.kept["a"].size() == 20 && s.kept["b"].size() == 20 && s.kept["own"].size() == 20; }));
+  for (std::size_t i = 0; i < 20; ++i) {
+    EXPECT_EQ(s.kept["a"][i]->n, static_cast<std::int64_t>(i + 1));
+    EXPECT_EQ(s.kept["own"][i]->n, static_cast<std::int64_t>(i + 1));
+    EXPECT_EQ(s.kept["a"][i].get(), s.kept["b"][i].get()) << "count " << i + 1 << " was copied for a sharing reader";
+    EXPECT_NE(s.kept["a"][i].get(), s.kept["own"][i].get());
+  }
 }
 
 // A system file written for one test, removed after it.

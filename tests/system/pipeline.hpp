@@ -2,7 +2,8 @@
 
 // A small system for the placement tests: a counter publishes 1..limit
 // from a periodic trigger; a doubler publishes each count times its factor
-// and serves "triple"; a checker calls "triple" on each doubled value and
+// and serves "triple"; a checker (reading each doubled value shared, the
+// doubler each count as a value) calls "triple" on each doubled value and
 // keeps what it got, and publishes it on "checked" (which nobody in the
 // system reads, so it is in the Shm domain for a test outside). Registered by the test and by system_peer alike.
 
@@ -96,7 +97,10 @@ inline prime::system::Component checker() {
       .build([](prime::system::Context& ctx) {
         auto triple = ctx.client<Count, Count>("triple");
         auto checked = ctx.output<Seen>("checked");
-        prime::forward(ctx.input<Count>("doubled"), [triple, checked](const Count& c, prime::Clock::time_point) {
+        // Read shared: in place in shared memory from another process.
+        prime::forward(ctx.shared_input<Count>("doubled"), [triple, checked](const std::shared_ptr<const Count>& doubled,
+                                                                             prime::Clock::time_point) {
+          const Count c = *doubled;
           auto answer = triple.call(c);
           auto& o = observed();
           {

@@ -46,9 +46,11 @@ struct LocalService {
 }  // namespace detail
 
 // The writing end of a topic a component publishes: to its readers in
-// this process (the value itself, moved to one reader, no serialisation),
-// and through Shm or Optimus to those elsewhere, as the placement links it.
-// Used by one thread at a time, as a medium's publisher is.
+// this process (the value itself, never serialised: moved to one reader of
+// values, copied for each further one, and one immutable copy for all the
+// readers that share it), and through Shm or Optimus to those elsewhere,
+// as the placement links it. Used by one thread at a time, as a medium's
+// publisher is.
 template <class T>
 class Output {
  public:
@@ -62,7 +64,7 @@ class Output {
     if constexpr (detail::Crosses<T>)
       if (state_->optimus)
         if (auto sent = state_->optimus->publish(value, stamp); !sent && result) result = std::unexpected(sent.error());
-    if (state_->local) state_->local->publish(std::move(value), stamp);
+    if (state_->local) publish_here(std::move(value), stamp);
     return result;
   }
 
@@ -72,11 +74,26 @@ class Output {
   friend class Context;
   struct State {
     std::string name;
-    std::optional<LocalSource<T>> local;
+    std::optional<LocalSource<T>> local;                     // readers of values
+    std::optional<LocalSource<std::shared_ptr<const T>>> shared;  // readers sharing one
     detail::ShmPublisher<T> shm;
     detail::OptimusPublisher<T> optimus;
   };
   explicit Output(std::shared_ptr<State> state) : state_{std::move(state)} {}
+
+  void publish_here(T&& value, Clock::time_point stamp) const {
+    if (state_->shared->readers() == 0) return state_->local->publish(std::move(value), stamp);
+    std::shared_ptr<const T> one;
+    if constexpr (std::copy_constructible<T>) {
+      if (state_->local->readers() > 0) {
+        one = std::make_shared<const T>(value);
+        state_->local->publish(std::move(value), stamp);
+      }
+    }
+    if (!one) one = std::make_shared<const T>(std::move(value));
+    state_->shared->publish(std::move(one), stamp);
+  }
+
   std::shared_ptr<State> state_;
 };
 
@@ -139,7 +156,10 @@ class Context {
     state->name = port;
     const auto reach = links_.reach(port);
     const auto qos = links_.topic_qos(port, declared.qos);
-    if (reach & Reach::here) state->local = hub<T>(port, qos);
+    if (reach & Reach::here) {
+      state->local = hub<T>(port, qos);
+      state->shared = shared_hub<T>(port, qos);
+    }
     if (reach & Reach::same_machine) {
       if constexpr (detail::Crosses<T>) state->shm.emplace(links_.shm->publisher<T>(links_.wire_name(port), shm_qos(qos)));
       else cannot_cross<T>(port, "another process");
@@ -152,40 +172,20 @@ class Context {
   }
 
   // The topic the component subscribes to as `port` (see Input), read
-  // where the placement put its publisher.
+  // where the placement put its publisher: each reader gets a value of its
+  // own (copied out of shared memory as it is read).
   template <class T>
   [[nodiscard]] Input<T> input(const std::string& port) {
-    const auto& declared = check<T>(port, PortKind::subscribes);
-    const auto reach = links_.reach(port);
-    const auto reader_qos = declared.qos;
-    typename Input<T>::Open open;
-    std::string medium = "local";
-    if (const auto fed = fed_input<T>(port)) {
-      open = *fed;
-      medium = "fed";
-    } else if (reach & Reach::here) {
-      open = [local = hub<T>(port, links_.topic_qos(port, declared.qos))](const Qos& qos) { return local.subscribe(qos); };
-    } else if (reach & Reach::same_machine) {
-      if constexpr (detail::Crosses<T>) {
-        auto topic = links_.shm->subscribe<T>(links_.wire_name(port), {.spin = std::chrono::duration_cast<std::chrono::microseconds>(reader_qos.spin)},
-                                              shm_qos(links_.topic_qos(port, declared.qos)));
-        open = [topic](const Qos&) { return Reader<T>{std::make_unique<detail::CopyingReader<T>>(topic.subscribe())}; };
-        medium = "shm";
-      } else {
-        cannot_cross<T>(port, "another process");
-      }
-    } else if (reach & Reach::other_machine) {
-      if constexpr (detail::Crosses<T>) {
-        auto topic = links_.optimus->subscribe<T>(links_.wire_name(port), reader_qos);
-        open = [topic](const Qos&) { return topic.subscribe(); };
-        medium = "optimus";
-      } else {
-        cannot_cross<T>(port, "another machine");
-      }
-    } else {  // nobody publishes it: an input that stays empty
-      open = [local = hub<T>(port, declared.qos)](const Qos& qos) { return local.subscribe(qos); };
-    }
-    return Input<T>{port, reader_qos, links_.local.runtime(), Graph::node(port, "source", medium), std::move(open)};
+    return open_input<T, false>(port);
+  }
+  // The same topic with every reader sharing one immutable value, never
+  // copied: one made by the publisher in this process, the sample in place
+  // in shared memory from another process (holding its slot for as long as
+  // a copy of the pointer lives: keep few), or the one received from Redis.
+  template <class T>
+    requires std::copy_constructible<T>
+  [[nodiscard]] Input<std::shared_ptr<const T>> shared_input(const std::string& port) {
+    return open_input<T, true>(port);
   }
 
   // The declared synchronised set `name`: a source of Synced<T...>, one
@@ -309,6 +309,49 @@ class Context {
  private:
   std::string where() const { return "component '" + instance_.name + "' (" + component_.type() + ")"; }
 
+  template <class T, bool Shared>
+  auto open_input(const std::string& port) {
+    using V = std::conditional_t<Shared, std::shared_ptr<const T>, T>;
+    const auto& declared = check<T>(port, PortKind::subscribes);
+    const auto reach = links_.reach(port);
+    const auto reader_qos = declared.qos;
+    const auto here = [&](const Qos& topic_qos) -> typename Input<V>::Open {
+      if constexpr (Shared) return [local = shared_hub<T>(port, topic_qos)](const Qos& qos) { return local.subscribe(qos); };
+      else return [local = hub<T>(port, topic_qos)](const Qos& qos) { return local.subscribe(qos); };
+    };
+    typename Input<V>::Open open;
+    std::string medium = "local";
+    if (auto fed = fed_input<T>(port)) {
+      if constexpr (Shared) open = [fed = *fed](const Qos& qos) { return detail::shared_values<T>(fed(qos)); };
+      else open = *fed;
+      medium = "fed";
+    } else if (reach & Reach::here) {
+      open = here(links_.topic_qos(port, declared.qos));
+    } else if (reach & Reach::same_machine) {
+      if constexpr (detail::Crosses<T>) {
+        auto topic = links_.shm->subscribe<T>(links_.wire_name(port), {.spin = std::chrono::duration_cast<std::chrono::microseconds>(reader_qos.spin)},
+                                              shm_qos(links_.topic_qos(port, declared.qos)));
+        if constexpr (Shared) open = [topic](const Qos&) { return detail::shared_in_place<T>(topic.subscribe()); };
+        else open = [topic](const Qos&) { return detail::copied_out<T>(topic.subscribe()); };
+        medium = "shm";
+      } else {
+        cannot_cross<T>(port, "another process");
+      }
+    } else if (reach & Reach::other_machine) {
+      if constexpr (detail::Crosses<T>) {
+        auto topic = links_.optimus->subscribe<T>(links_.wire_name(port), reader_qos);
+        if constexpr (Shared) open = [topic](const Qos&) { return detail::shared_values<T>(topic.subscribe()); };
+        else open = [topic](const Qos&) { return topic.subscribe(); };
+        medium = "optimus";
+      } else {
+        cannot_cross<T>(port, "another machine");
+      }
+    } else {  // nobody publishes it: an input that stays empty
+      open = here(declared.qos);
+    }
+    return Input<V>{port, reader_qos, links_.local.runtime(), Graph::node(port, "source", medium), std::move(open)};
+  }
+
   template <class T>
   const Port& check(const std::string& port, PortKind kind) {
     const auto* declared = component_.port(port, kind);
@@ -359,6 +402,17 @@ class Context {
       return typed<LocalSource<T>>(found->second, port);
     LocalSource<T> local{port, qos, links_.local.runtime(), Graph::node(port, "source", "local")};
     links_.topics.emplace(port, local);
+    return local;
+  }
+
+  // The in-process end of the topic for readers sharing each value.
+  template <class T>
+  LocalSource<std::shared_ptr<const T>> shared_hub(const std::string& port, const Qos& qos) {
+    std::scoped_lock lock{links_.mutex};
+    if (const auto found = links_.shared.find(port); found != links_.shared.end())
+      return typed<LocalSource<std::shared_ptr<const T>>>(found->second, port);
+    LocalSource<std::shared_ptr<const T>> local{port, qos, links_.local.runtime(), Graph::node(port, "source", "local")};
+    links_.shared.emplace(port, local);
     return local;
   }
 

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <functional>
+#include <type_traits>
 #include <memory>
 #include <optional>
 #include <stop_token>
@@ -17,50 +18,80 @@ namespace prime::system {
 
 namespace detail {
 
-// A reader of a shared-memory topic that gives each sample as a value: the
-// view is copied out and released as it is read, so a component's chain
-// holds no slot of the topic, whatever it keeps.
-template <class T>
-class CopyingReader final : public Reader<T>::Impl {
+// A reader of From that gives each sample as convert(value): a view copied
+// out of shared memory as it is read (so the chain holds no slot of the
+// topic), a view or a value made shareable, as an input wants it.
+template <class From, class Convert>
+class ConvertingReader final : public Reader<std::invoke_result_t<Convert&, From&&>>::Impl {
  public:
-  explicit CopyingReader(Reader<shm::View<T>> views) : views_{std::move(views)} {}
+  using To = std::invoke_result_t<Convert&, From&&>;
+  ConvertingReader(Reader<From> from, Convert convert) : from_{std::move(from)}, convert_{std::move(convert)} {}
 
-  std::optional<Sample<T>> try_read() override {
-    auto view = views_.try_read();
-    if (!view) return std::nullopt;
-    return copy(*view);
+  std::optional<Sample<To>> try_read() override {
+    auto got = from_.try_read();
+    if (!got) return std::nullopt;
+    return converted(std::move(*got));
   }
-  std::expected<Sample<T>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
-    auto view = views_.read_until(deadline, std::move(stop));
-    if (!view) return std::unexpected(std::move(view.error()));
-    return copy(*view);
+  std::expected<Sample<To>, Error> read_until(Clock::time_point deadline, std::stop_token stop) override {
+    auto got = from_.read_until(deadline, std::move(stop));
+    if (!got) return std::unexpected(std::move(got.error()));
+    return converted(std::move(*got));
   }
-  std::expected<std::size_t, Error> read_some(std::vector<Sample<T>>& out, std::size_t max, Clock::time_point deadline,
+  std::expected<std::size_t, Error> read_some(std::vector<Sample<To>>& out, std::size_t max, Clock::time_point deadline,
                                               std::stop_token stop) override {
     batch_.clear();
-    auto n = views_.read_some(batch_, max, deadline, std::move(stop));
+    auto n = from_.read_some(batch_, max, deadline, std::move(stop));
     if (!n) return n;
     out.reserve(out.size() + batch_.size());
-    for (const auto& view : batch_) out.push_back(copy(view));
-    batch_.clear();  // releases the views
+    for (auto& got : batch_) out.push_back(converted(std::move(got)));
+    batch_.clear();
     return n;
   }
-  [[nodiscard]] std::uint64_t lost() const override { return views_.lost(); }
+  [[nodiscard]] std::uint64_t lost() const override { return from_.lost(); }
 
  private:
-  static Sample<T> copy(const Sample<shm::View<T>>& view) { return {*view.value, view.stamp}; }
+  Sample<To> converted(Sample<From>&& got) { return {convert_(std::move(got.value)), got.stamp}; }
 
-  Reader<shm::View<T>> views_;
-  std::vector<Sample<shm::View<T>>> batch_;
+  Reader<From> from_;
+  Convert convert_;
+  std::vector<Sample<From>> batch_;
 };
+
+template <class From, class Convert>
+Reader<std::invoke_result_t<Convert&, From&&>> converting(Reader<From> from, Convert convert) {
+  return Reader<std::invoke_result_t<Convert&, From&&>>{
+      std::make_unique<ConvertingReader<From, Convert>>(std::move(from), std::move(convert))};
+}
+
+// A view of shared memory copied out as a value.
+template <class T>
+Reader<T> copied_out(Reader<shm::View<T>> views) {
+  return converting(std::move(views), [](shm::View<T>&& view) { return T{*view}; });
+}
+// A view of shared memory shared in place: it holds its slot for as long
+// as a copy of the pointer lives.
+template <class T>
+Reader<std::shared_ptr<const T>> shared_in_place(Reader<shm::View<T>> views) {
+  return converting(std::move(views), [](shm::View<T>&& view) {
+    auto held = std::make_shared<shm::View<T>>(std::move(view));
+    return std::shared_ptr<const T>{held, held->get()};
+  });
+}
+// A value of its own (received from Redis, say) made shareable.
+template <class T>
+Reader<std::shared_ptr<const T>> shared_values(Reader<T> values) {
+  return converting(std::move(values), [](T&& value) { return std::make_shared<const T>(std::move(value)); });
+}
 
 }  // namespace detail
 
 // A topic a component subscribes to: a source of values, to link chains to
 // (`input | local.chain(f)`), sync or collect. Each reader reads where the
 // placement put the publisher, in its own thread: a buffer the publisher
-// fills in this process, a shared-memory topic (each sample copied out as
-// it is read), or a Redis stream. Copies are handles to the same input.
+// fills in this process, a shared-memory topic, or a Redis stream. Copies
+// are handles to the same input. T is the message (Context::input: each
+// reader gets a value of its own), or std::shared_ptr<const M> (Context::
+// shared_input: every reader shares one, in place in shared memory).
 template <class T>
 class Input {
  public:

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <atomic>
 #include <concepts>
 #include <memory>
 #include <mutex>
@@ -56,6 +57,9 @@ class Hub {
     return n;
   }
 
+  // A look without the lock: a reader attaching now may or may not count.
+  [[nodiscard]] std::size_t readers() const noexcept { return count_.load(std::memory_order_relaxed); }
+
   [[nodiscard]] std::shared_ptr<Queue<T>> attach(const Qos& qos) {
     validate(qos, name_);
     auto queue = std::make_shared<Queue<T>>(qos);
@@ -65,6 +69,7 @@ class Hub {
     auto next = std::make_shared<List>(*readers_);
     next->push_back(queue);
     readers_ = std::move(next);
+    count_.store(readers_->size(), std::memory_order_relaxed);
     return queue;
   }
 
@@ -73,6 +78,7 @@ class Hub {
     auto next = std::make_shared<List>(*readers_);
     std::erase_if(*next, [queue](const auto& q) { return q.get() == queue; });
     readers_ = std::move(next);
+    count_.store(readers_->size(), std::memory_order_relaxed);
   }
 
   // Keeps `upstream` connected for as long as this hub lives, beside any other.
@@ -102,6 +108,7 @@ class Hub {
   const std::weak_ptr<RuntimeState> runtime_;
   std::mutex mutex_;
   std::shared_ptr<const List> readers_ = std::make_shared<const List>();
+  std::atomic<std::size_t> count_ = 0;  // readers_->size(), for a look without the lock
   std::vector<Connection> upstreams_;  // last member: disconnects before the rest goes
 };
 
@@ -189,6 +196,9 @@ class LocalSource {
       if (auto hub = weak.lock()) detail::RuntimeState::delivered(hub->publish(std::move(s), {}));
     }));
   }
+
+  // How many readers it has now: whether a value would go anywhere.
+  [[nodiscard]] std::size_t readers() const { return hub_->readers(); }
 
   [[nodiscard]] const std::string& name() const noexcept { return hub_->name(); }
   [[nodiscard]] const Qos& qos() const noexcept { return hub_->qos(); }

@@ -47,6 +47,7 @@ struct Links {
   std::unique_ptr<optimus::Core> optimus;  // when one reaches another machine
   std::mutex mutex;
   std::map<std::string, std::any> topics;    // LocalSource<T>: every in-process end of the topic
+  std::map<std::string, std::any> shared;    // LocalSource<std::shared_ptr<const T>>: its readers sharing each value
   std::map<std::string, std::any> services;  // std::shared_ptr<LocalService<In, Out>>
   std::map<std::string, std::any> fed;       // Input<T>::Open: an input given from outside the plan (Harness::feed_from)
   std::deque<Loop> loops;
