@@ -70,8 +70,9 @@ TEST(RobotReplay, ThePlannersChainOnTheDemosRecordingGivesTheSameCommandsOnEvery
 
 // The planner component (run on each synchronised pair) with the recording
 // fed into its two subscriptions and the test serving the driver's motors:
-// what it calls the motors with, in order.
-std::vector<robot::MotorCommand> planner_on_recording() {
+// what it calls the motors with, in order, once it has made `wanted`
+// calls (or the replay is over and 20 s have passed).
+std::vector<robot::MotorCommand> planner_on_recording(std::size_t wanted) {
   struct Calls {
     std::mutex mutex;
     std::condition_variable came;
@@ -97,8 +98,9 @@ std::vector<robot::MotorCommand> planner_on_recording() {
   std::unique_lock lock{calls->mutex};
   while (!replay.finished() && prime::Clock::now() < give_up) calls->came.wait_for(lock, 10ms);
   EXPECT_TRUE(replay.finished()) << "it waits for " << replay.waiting_for();
-  // Every set is made by now; the chain may still be calling with the last
-  // few, as drive_once's may: the two are compared as far as both went.
+  // Every set is made by now (the sync's output blocks, as the recording
+  // does: none is dropped); the chain may still be calling with the last.
+  calls->came.wait_until(lock, give_up, [&] { return calls->commands.size() >= wanted; });
   auto out = calls->commands;
   lock.unlock();
   h.stop();
@@ -107,11 +109,11 @@ std::vector<robot::MotorCommand> planner_on_recording() {
 
 TEST(RobotReplay, ThePlannerComponentAloneOnTheRecordingCallsTheMotorsWithTheChainsCommands) {
   const auto chain = drive_once();
+  ASSERT_GE(chain.size(), 110u);
   for (int run = 0; run < 2; ++run) {
-    const auto component = planner_on_recording();
-    ASSERT_GE(component.size(), 110u) << "run " << run;
-    const auto n = std::min(component.size(), chain.size());
-    for (std::size_t i = 0; i < n; ++i) {
+    const auto component = planner_on_recording(chain.size());
+    ASSERT_GE(component.size(), chain.size()) << "run " << run;
+    for (std::size_t i = 0; i < chain.size(); ++i) {
       EXPECT_EQ(component[i].speed, chain[i].speed) << "command " << i;
       EXPECT_EQ(component[i].turn_rate, chain[i].turn_rate) << "command " << i;
       EXPECT_EQ(component[i].sensor_stamp_ns, chain[i].sensor_stamp_ns) << "command " << i;

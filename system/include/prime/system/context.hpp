@@ -314,16 +314,17 @@ class Context {
     using V = std::conditional_t<Shared, std::shared_ptr<const T>, T>;
     const auto& declared = check<T>(port, PortKind::subscribes);
     const auto reach = links_.reach(port);
-    const auto reader_qos = declared.qos;
+    const auto fed = fed_input<T>(port);
+    const auto reader_qos = fed ? fed->qos : declared.qos;
     const auto here = [&](const Qos& topic_qos) -> typename Input<V>::Open {
       if constexpr (Shared) return [local = shared_hub<T>(port, topic_qos)](const Qos& qos) { return local.subscribe(qos); };
       else return [local = hub<T>(port, topic_qos)](const Qos& qos) { return local.subscribe(qos); };
     };
     typename Input<V>::Open open;
     std::string medium = "local";
-    if (auto fed = fed_input<T>(port)) {
-      if constexpr (Shared) open = [fed = *fed](const Qos& qos) { return detail::shared_values<T>(fed(qos)); };
-      else open = *fed;
+    if (fed) {
+      if constexpr (Shared) open = [from = fed->open](const Qos& qos) { return detail::shared_values<T>(from(qos)); };
+      else open = fed->open;
       medium = "fed";
     } else if (reach & Reach::here) {
       open = here(links_.topic_qos(port, declared.qos));
@@ -387,11 +388,11 @@ class Context {
 
   // The input's source when the host's owner gives it (a test playing a recording).
   template <class T>
-  std::optional<typename Input<T>::Open> fed_input(const std::string& port) {
+  std::optional<detail::FedInput<T>> fed_input(const std::string& port) {
     std::scoped_lock lock{links_.mutex};
     const auto found = links_.fed.find(port);
     if (found == links_.fed.end()) return std::nullopt;
-    return typed<typename Input<T>::Open>(found->second, port);
+    return typed<detail::FedInput<T>>(found->second, port);
   }
 
   // The in-process end of the topic: made by whichever of its ends comes first.

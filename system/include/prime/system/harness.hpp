@@ -84,15 +84,16 @@ class Harness {
     return feed;
   }
   // Values of a port the component subscribes to taken from `source`, any
-  // Source of T, in the component's own threads: a recording, say
-  // (prime::record::Replay's sources, played once start() returns).
+  // Source of T, in the component's own threads and with its QoS: a
+  // recording, say (prime::record::Replay's sources, played once start()
+  // returns; they block rather than drop, and so does what reads them).
   template <class S>
   void feed_from(const std::string& port, S source) {
     using T = typename S::value_type;
-    typename Input<T>::Open open = [source = std::move(source)](const Qos&) { return source.subscribe(); };
-    steps_.push_back([port, open = std::move(open)](Context& ctx) {
+    detail::FedInput<T> fed{[source](const Qos&) { return source.subscribe(); }, source.qos()};
+    steps_.push_back([port, fed = std::move(fed)](Context& ctx) {
       std::scoped_lock lock{ctx.links_.mutex};
-      ctx.links_.fed.emplace(port, open);
+      ctx.links_.fed.emplace(port, fed);
     });
   }
   template <class T>

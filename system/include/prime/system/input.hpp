@@ -121,4 +121,17 @@ class Input {
   std::shared_ptr<const State> state_;
 };
 
+namespace detail {
+
+// An input given its source from outside the plan (Harness::feed_from): how
+// to read it, and its QoS, which the input takes on (a recording's blocks,
+// so nothing downstream drops what it replays).
+template <class T>
+struct FedInput {
+  typename Input<T>::Open open;
+  Qos qos;
+};
+
+}  // namespace detail
+
 }  // namespace prime::system

@@ -49,7 +49,7 @@ struct Links {
   std::map<std::string, std::any> topics;    // LocalSource<T>: every in-process end of the topic
   std::map<std::string, std::any> shared;    // LocalSource<std::shared_ptr<const T>>: its readers sharing each value
   std::map<std::string, std::any> services;  // std::shared_ptr<LocalService<In, Out>>
-  std::map<std::string, std::any> fed;       // Input<T>::Open: an input given from outside the plan (Harness::feed_from)
+  std::map<std::string, std::any> fed;       // FedInput<T>: an input given from outside the plan (Harness::feed_from)
   std::deque<Loop> loops;
   std::deque<std::any> kept;  // what must live as long as the links (a service's handle)
 };
