@@ -64,11 +64,11 @@ std::string links(const Plan& plan) {
 }  // namespace
 
 int run(int argc, char** argv) {
-  std::string file, placement, process, domain;
+  std::string file, placement, process, domain, ns;
   std::vector<std::string> overrides;
   enum class Mode { none, host, check, describe } mode = Mode::none;
   const auto usage = [&](const std::string& why) {
-    std::fprintf(stderr, "%s: %s\nusage: %s --prime-system FILE --placement NAME --process NAME [--param component.name=value]... [--domain D]\n"
+    std::fprintf(stderr, "%s: %s\nusage: %s --prime-system FILE --placement NAME --process NAME [--param component.name=value]... [--domain D] [--namespace NS]\n"
                          "       %s --prime-check FILE --placement NAME\n       %s --prime-describe\n",
                  argv[0], why.c_str(), argv[0], argv[0], argv[0]);
     return 2;
@@ -79,7 +79,7 @@ int run(int argc, char** argv) {
     if (arg == "--prime-describe") {
       mode = Mode::describe;
     } else if (arg == "--prime-system" || arg == "--prime-check" || arg == "--placement" || arg == "--process" || arg == "--param" ||
-               arg == "--domain") {
+               arg == "--domain" || arg == "--namespace") {
       const char* v = value();
       if (!v) return usage(arg + " needs a value");
       if (arg == "--prime-system" || arg == "--prime-check") {
@@ -91,6 +91,8 @@ int run(int argc, char** argv) {
         process = v;
       } else if (arg == "--domain") {
         domain = v;
+      } else if (arg == "--namespace") {
+        ns = v;
       } else {
         overrides.emplace_back(v);
       }
@@ -108,6 +110,7 @@ int run(int argc, char** argv) {
   try {
     auto system = load_system(file, overrides);
     if (!domain.empty()) system.domain = domain;
+    if (!ns.empty()) system.ns = ns;
     load_libraries(system);
     if (mode == Mode::check) {
       const auto found = problems(system, registry, placement, true);
@@ -129,8 +132,8 @@ int run(int argc, char** argv) {
     auto plan = plan_of(system, registry, placement, process);
     std::string hosted;
     for (const auto& i : plan.instances) hosted += (hosted.empty() ? "" : ", ") + i.name + " (" + i.component + ")";
-    std::printf("[prime] process '%s' of placement '%s': hosting %s; links: %s\n", process.c_str(), placement.c_str(),
-                hosted.c_str(), links(plan).c_str());
+    std::printf("[prime] process '%s' of placement '%s': hosting %s; links: %s%s\n", process.c_str(), placement.c_str(),
+                hosted.c_str(), links(plan).c_str(), plan.ns.empty() ? "" : ("; names under '" + plan.ns + "/'").c_str());
     std::fflush(stdout);
     Host host{std::move(plan), registry};
     std::printf("[prime] process '%s' ready\n", process.c_str());

@@ -118,6 +118,33 @@ placements:
   EXPECT_EQ(launcher.exit_code(20s), 0);
 }
 
+// One system launched twice in one domain, each under a namespace of its
+// own: two counters, two doublers, two checkers, none in the other's way.
+TEST_F(Launch, OneSystemRunsTwiceSideBySideUnderTwoNamespaces) {
+  write("  split:\n    checks: [checker]\n    counts: [counter]\n    doubles: [doubler]\n");
+  prime::shm::Core shm{domain_, {.participant = "test"}};
+  auto left = shm.subscribe<pipeline::Seen>("left/checked", {}, {.capacity = 1024}).subscribe();
+  auto right = shm.subscribe<pipeline::Seen>("right/checked", {}, {.capacity = 1024}).subscribe();
+  auto first = launch({"--namespace", "left"});
+  ASSERT_TRUE(first.says("launch  | every process is ready; Ctrl-C stops them", 20s));
+  auto second = launch({"--namespace", "right"});
+  ASSERT_TRUE(second.says("launch  | every process is ready; Ctrl-C stops them", 20s));
+  for (auto* checked : {&left, &right}) {
+    std::int64_t last = 0;
+    for (int i = 0; i < 20; ++i) {  // each system's own counts, in order, each answered
+      auto got = checked->read_for(10s);
+      ASSERT_TRUE(got) << got.error().describe();
+      EXPECT_EQ(got->value->tripled, 3 * got->value->doubled);
+      EXPECT_TRUE(last == 0 || got->value->doubled == last + 2) << got->value->doubled << " after " << last;
+      last = got->value->doubled;
+    }
+  }
+  ::kill(first.pid(), SIGINT);
+  ::kill(second.pid(), SIGINT);
+  EXPECT_EQ(first.exit_code(20s), 0);
+  EXPECT_EQ(second.exit_code(20s), 0);
+}
+
 TEST_F(Launch, ALibraryThatCannotBeLoadedIsRefusedByLine) {
   std::ofstream{path_} << "system: " << domain_ << "\nlibraries:\n  - ./no_such_library.so\ncomponents:\n  c: {type: test.counter}\n"
                        << "placements:\n  p: {x: [c]}\n";

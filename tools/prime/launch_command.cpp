@@ -68,6 +68,7 @@ std::vector<std::string> arguments(const Child& c, const LaunchOptions& o, const
   std::vector<std::string> args{c.executable, "--prime-system", o.file, "--placement", placement, "--process", c.spec.name};
   for (const auto& p : o.params) args.insert(args.end(), {"--param", p});
   if (!o.domain.empty()) args.insert(args.end(), {"--domain", o.domain});
+  if (!o.ns.empty()) args.insert(args.end(), {"--namespace", o.ns});
   return args;
 }
 

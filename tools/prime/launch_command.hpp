@@ -15,6 +15,7 @@ struct LaunchOptions {
   std::vector<std::string> params;  // component.name=value, given to every process
   std::string executable;           // what every process runs, instead of the file's
   std::string domain;               // the domain, instead of the file's `system` (empty: the file's)
+  std::string ns;                   // the namespace of every name, instead of the file's (empty: the file's)
   double grace = 5;                 // seconds from SIGTERM to SIGKILL when stopping
   double ready_timeout = 20;        // seconds a process may take to be ready
 };

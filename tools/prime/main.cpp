@@ -209,6 +209,8 @@ int main(int argc, char** argv) {
   launch->add_option("--param", launch_options.params, "component.name=value: a parameter's value, for every process (repeatable)")
       ->allow_extra_args(false);
   launch->add_option("--executable", launch_options.executable, "what every process runs, instead of what the file says");
+  launch->add_option("--namespace", launch_options.ns,
+                     "a prefix of every topic and service name, instead of the file's: one system launched twice side by side");
   launch->add_option("--grace", launch_options.grace, "seconds from SIGTERM to SIGKILL when stopping (default 5)")->check(seconds);
   launch->add_option("--ready-timeout", launch_options.ready_timeout, "seconds a process may take to be ready (default 20)")->check(seconds);
   bench::Options b;
