@@ -70,11 +70,13 @@ struct Observed {
   std::mutex mutex;
   std::condition_variable changed;
   std::vector<Seen> seen;
+  std::vector<std::uintptr_t> where;  // of each doubled value the checker read (shared)
   std::vector<std::string> errors;
 
   void clear() {
     std::scoped_lock lock{mutex};
     seen.clear();
+    where.clear();
     errors.clear();
   }
   // Whether `done(seen)` held within `timeout`.
@@ -105,6 +107,7 @@ inline prime::system::Component checker() {
           auto& o = observed();
           {
             std::scoped_lock lock{o.mutex};
+            o.where.push_back(reinterpret_cast<std::uintptr_t>(doubled.get()));
             if (answer) o.seen.push_back({c.n, answer->n});
             else o.errors.push_back(answer.error().describe());
           }

@@ -52,8 +52,8 @@ placements:
     checker: [checker]
     doubler: [doubler]
     counter: [counter]
-  machines:
-    checker: {components: [checker], machine: b}
+  machines:                 # every link between the doubler and the others through Redis
+    checker: {components: [checker], machine: a}
     doubler: {components: [doubler], machine: b}
     counter: {components: [counter], machine: a}
 )";
@@ -81,6 +81,20 @@ placements:
   const sys::Registry& registry_ = sys::Registry::global();
 };
 
+// Whether `address` lies in this process's mapping of a shared-memory
+// segment of `domain` (/proc/self/maps: "start-end perms offset dev inode path").
+bool in_shared_memory(std::uintptr_t address, const std::string& domain) {
+  std::ifstream maps{"/proc/self/maps"};
+  for (std::string line; std::getline(maps, line);) {
+    if (line.find("/dev/shm/prime." + domain + ".") == std::string::npos) continue;
+    const auto dash = line.find('-');
+    const auto start = std::stoull(line.substr(0, dash), nullptr, 16);
+    const auto end = std::stoull(line.substr(dash + 1, line.find(' ') - dash - 1), nullptr, 16);
+    if (address >= start && address < end) return true;
+  }
+  return false;
+}
+
 TEST_P(EveryPlacement, DeliversEveryValueAndEveryAnswerInOrder) {
   const auto system = sys::load_system(path_);
   ASSERT_TRUE(sys::problems(system, registry_, GetParam().name).empty());
@@ -100,6 +114,11 @@ TEST_P(EveryPlacement, DeliversEveryValueAndEveryAnswerInOrder) {
   EXPECT_TRUE(o.errors.empty()) << o.errors.front();
   EXPECT_TRUE(all_of(1, limit_, o.seen)) << o.seen.size() << " seen";
   EXPECT_EQ(o.seen.size(), static_cast<std::size_t>(limit_));
+  // The checker reads the doubled values shared: in place in shared memory
+  // from the doubler's process on its machine (split); the doubler's own
+  // value in this process (one); the one received from Redis (machines).
+  const bool in_place = std::string{GetParam().name} == "split";
+  for (const auto address : o.where) ASSERT_EQ(in_shared_memory(address, domain_), in_place) << std::hex << address;
 }
 
 // The same fault in every placement: the process hosting the doubler is
