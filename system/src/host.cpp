@@ -51,6 +51,25 @@ void Registry::add(Component component) {
     throw Failure{{Errc::in_use, "component '" + type + "' is registered twice"}};
 }
 
+bool Registry::declare(Component component) noexcept {
+  try {
+    add(std::move(component));
+    return true;
+  } catch (const std::exception& e) {
+    try {
+      std::scoped_lock lock{mutex_};
+      problems_.emplace_back(e.what());
+    } catch (...) {  // out of memory for the words: the component is missing all the same
+    }
+    return false;
+  }
+}
+
+std::vector<std::string> Registry::problems() const {
+  std::scoped_lock lock{mutex_};
+  return problems_;
+}
+
 const Component* Registry::find(std::string_view type) const {
   std::scoped_lock lock{mutex_};
   const auto found = components_.find(type);
@@ -72,7 +91,7 @@ std::string param_problem(const Component& component, const Instance& instance) 
       if (!component.trigger(trigger)) return where + ": no trigger '" + trigger + "' is declared";
       const auto* ms = std::get_if<std::int64_t>(&value);
       if (!ms) return where + " is an integer (milliseconds), given " + std::string{param_type_name(value.index())};
-      if (*ms <= 0) return where + " must be positive, given " + std::to_string(*ms);
+      if (*ms <= 0 || *ms > 86'400'000) return where + " must be from 1 to 86400000 (a day), given " + std::to_string(*ms);
       continue;
     }
     const auto* declared = component.param(name);

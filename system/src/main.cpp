@@ -1,6 +1,7 @@
 #include "prime/system/main.hpp"
 
 #include <signal.h>
+#include <sys/prctl.h>
 #include <unistd.h>
 
 #include <cstdio>
@@ -102,6 +103,10 @@ int run(int argc, char** argv) {
   }
   const auto& registry = Registry::global();
   if (mode == Mode::none) return usage("say what to do");
+  if (const auto wrong = registry.problems(); !wrong.empty()) {  // PRIME_COMPONENT, as the program started
+    for (const auto& w : wrong) std::fprintf(stderr, "%s: %s\n", argv[0], w.c_str());
+    return mode == Mode::check ? 1 : 2;
+  }
   if (mode == Mode::describe) {
     describe(registry);
     return 0;
@@ -113,7 +118,7 @@ int run(int argc, char** argv) {
     if (!ns.empty()) system.ns = ns;
     load_libraries(system);
     if (mode == Mode::check) {
-      const auto found = problems(system, registry, placement, true);
+      const auto found = problems(system, registry, placement);
       for (const auto& p : found) std::fprintf(stderr, "%s\n", p.c_str());
       if (!found.empty()) return 1;
       std::string order;
@@ -129,6 +134,16 @@ int run(int argc, char** argv) {
     sigaddset(&stop_signals, SIGINT);
     sigaddset(&stop_signals, SIGTERM);
     pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+    // Started by prime launch (it says where to tell it we are ready): a
+    // launcher that dies takes its processes with it (SIGTERM, taken below).
+    int ready_fd = -1;
+    if (const char* fd = std::getenv("PRIME_READY_FD")) {
+      char* end = nullptr;
+      const long n = std::strtol(fd, &end, 10);
+      if (end != fd && *end == '\0' && n > 2 && n < 1024) ready_fd = static_cast<int>(n);
+      ::unsetenv("PRIME_READY_FD");  // not for what this process starts
+      ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+    }
     auto plan = plan_of(system, registry, placement, process);
     std::string hosted;
     for (const auto& i : plan.instances) hosted += (hosted.empty() ? "" : ", ") + i.name + " (" + i.component + ")";
@@ -138,10 +153,9 @@ int run(int argc, char** argv) {
     Host host{std::move(plan), registry};
     std::printf("[prime] process '%s' ready\n", process.c_str());
     std::fflush(stdout);
-    if (const char* fd = std::getenv("PRIME_READY_FD")) {
-      const int ready = std::atoi(fd);
-      [[maybe_unused]] const auto n = ::write(ready, "ready\n", 6);
-      ::close(ready);
+    if (ready_fd >= 0) {
+      [[maybe_unused]] const auto n = ::write(ready_fd, "ready\n", 6);
+      ::close(ready_fd);
     }
     int signal = 0;
     sigwait(&stop_signals, &signal);

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <map>
 #include <set>
 
 namespace prime::system {
@@ -20,8 +21,15 @@ struct Reader {
   [[noreturn]] void fail(const YAML::Node& node, const std::string& what) const { fail(line(node), what); }
   static int line(const YAML::Node& node) { return node.Mark().line + 1; }
 
+  // A map, each key once (YAML readers keep a repeated key; a system file
+  // must not mean two things).
   void expect_map(const YAML::Node& node, const std::string& what) const {
     if (!node.IsMap()) fail(node, what + " must be a map");
+    std::map<std::string, int> seen;
+    for (const auto& entry : node)
+      if (const auto [first, fresh] = seen.emplace(entry.first.Scalar(), line(entry.first)); !fresh)
+        fail(entry.first, "'" + entry.first.Scalar() + "' appears twice in " + what + " (first at line " +
+                              std::to_string(first->second) + ")");
   }
   std::string text(const YAML::Node& node, const std::string& what) const {
     if (!node.IsScalar()) fail(node, what + " must be a text");
@@ -64,6 +72,10 @@ struct Reader {
   }
 };
 
+// Values each reader of a topic may buffer, at most: a bound on what one
+// line of a file makes every reader allocate.
+constexpr std::int64_t kMaxCapacity = 1 << 20;
+
 Qos topic_qos(const Reader& r, const std::string& name, const YAML::Node& node) {
   const auto what = "topic '" + name + "'";
   r.expect_map(node, what);
@@ -71,7 +83,8 @@ Qos topic_qos(const Reader& r, const std::string& name, const YAML::Node& node) 
   Qos qos;
   if (node["capacity"]) {
     const auto capacity = r.integer(node["capacity"], what + ": capacity");
-    if (capacity < 1) r.fail(node["capacity"], what + ": capacity must be at least 1");
+    if (capacity < 1 || capacity > kMaxCapacity)
+      r.fail(node["capacity"], what + ": capacity must be from 1 to " + std::to_string(kMaxCapacity));
     qos.capacity = static_cast<std::size_t>(capacity);
   }
   if (node["overflow"]) {
@@ -178,7 +191,7 @@ SystemSpec load_system(const std::string& path, const std::vector<std::string>& 
       if (const auto expose = entry.second["expose"]) {
         bool on = false;
         if (!expose.IsScalar() || !YAML::convert<bool>::decode(expose, on)) r.fail(expose, "topic '" + name + "': expose must be true or false");
-        if (on) system.exposed.insert(name);
+        if (on) system.exposed[name] = Reader::line(entry.first);
       }
     }
   }
@@ -217,11 +230,15 @@ void load_libraries(const SystemSpec& system) {
     // A name with a slash is a path (beside the file when relative); one
     // without is looked up as dlopen does (LD_LIBRARY_PATH, the cache).
     const auto path = name.find('/') == std::string::npos ? name : std::filesystem::absolute(dir / name).lexically_normal().string();
+    const auto before = Registry::global().problems().size();
     if (!::dlopen(path.c_str(), RTLD_NOW | RTLD_GLOBAL)) {
       const char* why = ::dlerror();
       throw Failure{{Errc::not_found, system.file + ":" + std::to_string(line) + ": the library of components '" + name +
                                           "' cannot be loaded: " + (why ? why : "dlopen failed")}};
     }
+    if (const auto now = Registry::global().problems(); now.size() > before)
+      throw Failure{{Errc::in_use, system.file + ":" + std::to_string(line) + ": the library of components '" + name +
+                                       "': " + now[before]}};
   }
 }
 
@@ -270,8 +287,7 @@ unsigned reach_between(const ProcessSpec& from, const ProcessSpec& to) {
 
 }  // namespace
 
-std::vector<std::string> problems(const SystemSpec& system, const Registry& registry, std::string_view placement_name,
-                                  bool only_known) {
+std::vector<std::string> problems(const SystemSpec& system, const Registry& registry, std::string_view placement_name) {
   std::vector<std::string> found;
   const auto at = [&](int line, const std::string& what) { found.push_back(system.file + ":" + std::to_string(line) + ": " + what); };
   const auto line_of = [&](const std::string& key) {
@@ -285,16 +301,16 @@ std::vector<std::string> problems(const SystemSpec& system, const Registry& regi
     found.push_back(system.file + ": no placement '" + std::string{placement_name} + "' (it has " + list(names) + ")");
     return found;
   }
-  bool all_known = true;
+  // Every program of the system knows every component of it (built in, or
+  // from the file's libraries): where each link goes depends on all ends.
   for (const auto& instance : system.instances) {
     const auto* component = registry.find(instance.component);
     if (!component) {
-      all_known = false;
-      if (only_known) continue;
       std::vector<std::string> known;
       for (const auto* c : registry.components()) known.push_back(c->type());
       at(line_of(instance.name), "component '" + instance.name + "': no component type '" + instance.component +
-                                     "' is registered (known: " + list(known) + ")");
+                                     "' is registered (known: " + list(known) +
+                                     "); each program of a system knows every component of it, built in or from its libraries");
       continue;
     }
     if (auto problem = param_problem(*component, instance); !problem.empty()) {
@@ -349,6 +365,12 @@ std::vector<std::string> problems(const SystemSpec& system, const Registry& regi
       else crossing(p, s);
     }
   }
+  // An exposed topic goes into the Shm domain: its type must cross processes.
+  for (const auto& [topic, line] : system.exposed)
+    if (const auto publishers = ends.publishers.find(topic); publishers != ends.publishers.end())
+      if (const auto& p = publishers->second.front(); !p.port->crosses_processes)
+        at(line, "topic '" + topic + "' is exposed, and its type " + p.port->message.describe() +
+                     " cannot leave its process (not trivially copyable)");
   for (const auto& [service, servers] : ends.servers)
     for (std::size_t i = 1; i < servers.size(); ++i)
       at(line_of(servers[i].instance->name), "service '" + service + "' is served twice: by '" + servers[0].instance->name +
@@ -357,8 +379,7 @@ std::vector<std::string> problems(const SystemSpec& system, const Registry& regi
     const auto server = ends.servers.find(service);
     for (const auto& c : callers) {
       if (server == ends.servers.end()) {
-        if (all_known || !only_known)
-          at(line_of(c.instance->name), "'" + c.instance->name + "' calls the service '" + service + "', which nobody serves");
+        at(line_of(c.instance->name), "'" + c.instance->name + "' calls the service '" + service + "', which nobody serves");
         continue;
       }
       const auto& s = server->second.front();
@@ -385,7 +406,7 @@ std::vector<std::string> start_order(const SystemSpec& system, const Registry& r
           if (c.process != s.process) after[c.process->name].insert(s.process->name);
   std::vector<std::string> order;
   std::set<std::string> started;
-  while (order.size() < placement->processes.size()) {
+  while (started.size() < placement->processes.size()) {
     bool progressed = false;
     for (const auto& p : placement->processes) {
       if (started.contains(p.name)) continue;
@@ -404,7 +425,7 @@ std::vector<std::string> start_order(const SystemSpec& system, const Registry& r
 }
 
 Plan plan_of(const SystemSpec& system, const Registry& registry, std::string_view placement_name, std::string_view process_name) {
-  if (auto found = problems(system, registry, placement_name, true); !found.empty())
+  if (auto found = problems(system, registry, placement_name); !found.empty())
     throw Failure{{Errc::invalid_argument, found.front()}};
   const auto* placement = system.placement(placement_name);
   const auto me = std::find_if(placement->processes.begin(), placement->processes.end(),
@@ -431,7 +452,8 @@ Plan plan_of(const SystemSpec& system, const Registry& registry, std::string_vie
     const auto subscribers = ends.subscribers.find(topic);
     for (const auto& p : publishers) {
       if (!mine(p)) continue;
-      if (subscribers == ends.subscribers.end() || system.exposed.contains(topic)) add(topic, Reach::same_machine);
+      if ((subscribers == ends.subscribers.end() || system.exposed.contains(topic)) && p.port->crosses_processes)
+        add(topic, Reach::same_machine);
       if (subscribers != ends.subscribers.end())
         for (const auto& s : subscribers->second) add(topic, reach_between(*me, *s.process));
     }
@@ -440,8 +462,8 @@ Plan plan_of(const SystemSpec& system, const Registry& registry, std::string_vie
     const auto publishers = ends.publishers.find(topic);
     for (const auto& s : subscribers) {
       if (!mine(s)) continue;
-      add(topic, publishers == ends.publishers.end() ? Reach::same_machine  // from outside: through Shm
-                                                     : reach_between(*me, *publishers->second.front().process));
+      if (publishers != ends.publishers.end()) add(topic, reach_between(*me, *publishers->second.front().process));
+      else if (s.port->crosses_processes) add(topic, Reach::same_machine);  // from outside the system, through Shm
     }
   }
   for (const auto& [service, servers] : ends.servers) {

@@ -136,6 +136,25 @@ TEST(ComponentHarness, ASynchronisedSetUsedAsItWasNotDeclaredIsRefused) {
                          Errc::type_mismatch, "'left' is subscribed to as"));
 }
 
+TEST(ComponentHarness, ATypeThatCannotLeaveItsProcessLinksComponentsInIt) {
+  const auto echo = sys::Component{"test.echo_words"}
+                        .subscribes<std::string>("words")
+                        .publishes<std::string>("echoed")
+                        .build([](sys::Context& ctx) {
+                          auto out = ctx.output<std::string>("echoed");
+                          prime::forward(ctx.input<std::string>("words"),
+                                         [out](const std::string& w, prime::Clock::time_point) { (void)out.publish(w + "!"); });
+                        });
+  sys::Harness h{echo};
+  auto words = h.feed<std::string>("words");
+  auto echoed = h.probe<std::string>("echoed");
+  h.start();
+  ASSERT_TRUE(words.publish(std::string(1000, 'a')));  // on the heap: no trivially copyable bytes
+  auto got = echoed.read_for(5s);
+  ASSERT_TRUE(got) << got.error().describe();
+  EXPECT_EQ(got->value, std::string(1000, 'a') + "!");
+}
+
 // Readers that share each count: what each instance was given, kept alive.
 struct Shared {
   std::mutex mutex;
@@ -191,9 +210,18 @@ TEST(InProcessLinks, ReadersThatShareAValueAreGivenTheSameOneAndReadersOfValuesT
 }
 
 // A system file written for one test, removed after it.
+// Words: a type that cannot leave its process (not trivially copyable).
+sys::Component talker() {
+  return sys::Component{"test.talker"}.publishes<std::string>("words").build([](sys::Context& ctx) { (void)ctx.output<std::string>("words"); });
+}
+
 class SystemFile : public ::testing::Test {
  protected:
-  void SetUp() override { pipeline::register_all(); }
+  void SetUp() override {
+    pipeline::register_all();
+    static const bool talker_registered = (sys::Registry::global().add(talker()), true);
+    (void)talker_registered;
+  }
   void TearDown() override { std::filesystem::remove(path_); }
   std::string write(const std::string& text) {
     std::ofstream{path_} << text;
@@ -270,6 +298,14 @@ TEST_F(SystemFile, TakesParameterOverridesAsTheCommandLineGivesThem) {
   EXPECT_TRUE(fails_with([&] { (void)sys::load_system(path_, {"nobody.factor=1"}); }, Errc::invalid_argument, "has no component 'nobody'"));
 }
 
+TEST_F(SystemFile, ATopicThatCannotLeaveItsProcessStaysInItWhenNobodyReadsIt) {
+  const auto system = sys::load_system(write("components:\n  t: {type: test.talker}\nplacements:\n  p: {x: [t]}\n"));
+  ASSERT_TRUE(sys::problems(system, registry, "p").empty());
+  const auto plan = sys::plan_of(system, registry, "p", "x");
+  const auto reach = plan.reach.find("words");
+  EXPECT_TRUE(reach == plan.reach.end() || reach->second == sys::Reach::here);  // not offered to the Shm domain
+}
+
 // Each wrong system names the file, the line and what is wrong.
 struct WrongSystem {
   const char* name;
@@ -321,7 +357,13 @@ INSTANTIATE_TEST_SUITE_P(
                     ":2: unknown key 'param' in component 'a' (it takes type, params)"},
         WrongSystem{"bad_overflow", "components:\n  a: {type: test.counter}\ntopics:\n  counts: {overflow: wait}\nplacements:\n  p: {x: [a]}\n",
                     ":4: topic 'counts': overflow is drop_oldest or block, not 'wait'"},
-        WrongSystem{"not_yaml", "components: [a\n", ":2: not YAML"}),
+        WrongSystem{"not_yaml", "components: [a\n", ":2: not YAML"},
+        WrongSystem{"process_named_twice", "components:\n  a: {type: test.counter}\nplacements:\n  p:\n    x: [a]\n    x: [a]\n",
+                    ":6: 'x' appears twice in placement 'p' (first at line 5)"},
+        WrongSystem{"capacity_too_large", "components:\n  a: {type: test.counter}\ntopics:\n  counts: {capacity: 100000000}\nplacements:\n  p: {x: [a]}\n",
+                    ":4: topic 'counts': capacity must be from 1 to 1048576"},
+        WrongSystem{"exposed_cannot_leave", "components:\n  t: {type: test.talker}\ntopics:\n  words: {expose: true}\nplacements:\n  p: {x: [t]}\n",
+                    ":4: topic 'words' is exposed, and its type"}),
     [](const auto& info) { return std::string{info.param.name}; });
 
 }  // namespace

@@ -145,6 +145,39 @@ TEST_F(Launch, OneSystemRunsTwiceSideBySideUnderTwoNamespaces) {
   EXPECT_EQ(second.exit_code(20s), 0);
 }
 
+// Whether process `pid` is gone (or a zombie nobody reaped yet: it runs nothing).
+bool gone(pid_t pid) {
+  std::ifstream stat{"/proc/" + std::to_string(pid) + "/stat"};
+  std::string line;
+  if (!std::getline(stat, line)) return true;
+  const auto state = line.find(") ");
+  return state != std::string::npos && line.size() > state + 2 && line[state + 2] == 'Z';
+}
+
+// A launcher killed with SIGKILL (it can do nothing): its processes are
+// told by the kernel (SIGTERM as their parent dies) and stop themselves,
+// not left running unsupervised.
+TEST_F(Launch, ProcessesStopWhenTheirLauncherIsKilled) {
+  write("  split:\n    checks: [checker]\n    counts: [counter]\n    doubles: [doubler]\n");
+  auto launcher = launch();
+  std::vector<pid_t> pids;
+  for (int i = 0; i < 3; ++i) {
+    const auto ready = launcher.next_line_where(
+        [](const std::string& line) { return line.starts_with("launch  | '") && line.find("' is ready (pid ") != std::string::npos; }, 20s);
+    ASSERT_TRUE(ready);
+    const auto at = ready->find("(pid ");
+    ASSERT_NE(at, std::string::npos) << *ready;
+    pids.push_back(std::stoi(ready->substr(at + 5)));
+  }
+  ASSERT_TRUE(launcher.says("launch  | every process is ready; Ctrl-C stops them", 20s));
+  launcher.kill9();
+  const auto give_up = std::chrono::steady_clock::now() + 20s;
+  for (const auto pid : pids) {
+    while (!gone(pid) && std::chrono::steady_clock::now() < give_up) ::usleep(20'000);  // polls the kernel's process table
+    EXPECT_TRUE(gone(pid)) << "process " << pid << " outlived its launcher";
+  }
+}
+
 TEST_F(Launch, ALibraryThatCannotBeLoadedIsRefusedByLine) {
   std::ofstream{path_} << "system: " << domain_ << "\nlibraries:\n  - ./no_such_library.so\ncomponents:\n  c: {type: test.counter}\n"
                        << "placements:\n  p: {x: [c]}\n";

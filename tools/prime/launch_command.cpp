@@ -91,6 +91,7 @@ pid_t spawn(const std::vector<std::string>& args, int out, int err, int ready) {
   sigaddset(&defaults, SIGINT);
   sigaddset(&defaults, SIGTERM);
   sigaddset(&defaults, SIGPIPE);
+  sigaddset(&defaults, SIGHUP);
   posix_spawnattr_setsigdefault(&attributes, &defaults);
   std::vector<std::string> env;
   for (char** e = environ; *e; ++e)
@@ -191,7 +192,10 @@ class Launcher {
         whose.emplace_back(&c, which);
       }
     }
-    if (fds.empty()) return;
+    if (fds.empty()) {  // nothing to read (a restart's backoff): wait all the same, not spin
+      ::poll(nullptr, 0, static_cast<int>(wait.count()));
+      return;
+    }
     if (::poll(fds.data(), fds.size(), static_cast<int>(wait.count())) <= 0) return;
     for (std::size_t i = 0; i < fds.size(); ++i) {
       if (!(fds[i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
@@ -409,15 +413,23 @@ int launch(const LaunchOptions& o) {
   sigemptyset(&on_stop.sa_mask);
   ::sigaction(SIGINT, &on_stop, nullptr);
   ::sigaction(SIGTERM, &on_stop, nullptr);
+  ::sigaction(SIGHUP, &on_stop, nullptr);  // the terminal closed: stop them, do not leave them unsupervised
+  ::signal(SIGPIPE, SIG_IGN);              // output piped into a reader that left: a failed write, not death
 
   Launcher launcher{o, placement_name, std::move(children)};
   std::string listed;
   for (const auto& name : order) listed += (listed.empty() ? "" : ", ") + name;
   launcher.say("placement '" + placement_name + "' of " + o.file + ": starting " + listed);
-  bool failed = !launcher.start_all(order) && !stop_asked;
-  if (!failed && !stop_asked) {
-    launcher.say("every process is ready; Ctrl-C stops them");
-    failed = launcher.supervise();
+  bool failed = false;
+  try {
+    failed = !launcher.start_all(order) && !stop_asked;
+    if (!failed && !stop_asked) {
+      launcher.say("every process is ready; Ctrl-C stops them");
+      failed = launcher.supervise();
+    }
+  } catch (const std::exception& e) {  // out of pipes or processes, say: stop what runs, then say so
+    launcher.say(std::string{"failed: "} + e.what());
+    failed = true;
   }
   const bool clean = launcher.stop_all();
   launcher.say(failed ? "stopped, after a failure" : clean ? "stopped" : "stopped, not every process cleanly");

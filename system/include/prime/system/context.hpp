@@ -28,10 +28,20 @@ namespace detail {
 template <class T>
 concept Crosses = shm::Message<T>;
 
+// A medium's publisher of T where T may cross, else nothing (named only
+// when chosen: the publishers refuse other types).
 template <class T>
-using ShmPublisher = std::conditional_t<Crosses<T>, std::optional<shm::Publisher<T>>, std::monostate>;
+struct ShmPublisherOf {
+  using type = std::optional<shm::Publisher<T>>;
+};
 template <class T>
-using OptimusPublisher = std::conditional_t<Crosses<T>, std::optional<optimus::Publisher<T>>, std::monostate>;
+struct OptimusPublisherOf {
+  using type = std::optional<optimus::Publisher<T>>;
+};
+template <class T>
+using ShmPublisher = typename std::conditional_t<Crosses<T>, ShmPublisherOf<T>, std::type_identity<std::monostate>>::type;
+template <class T>
+using OptimusPublisher = typename std::conditional_t<Crosses<T>, OptimusPublisherOf<T>, std::type_identity<std::monostate>>::type;
 
 // A service served in this process, called directly by its in-process
 // clients: one call at a time, as one worker serves it in another process.
@@ -142,7 +152,13 @@ class Context {
     using Stored = std::conditional_t<std::is_same_v<V, bool>, bool,
                    std::conditional_t<std::is_integral_v<V>, std::int64_t,
                    std::conditional_t<std::is_floating_point_v<V>, double, std::string>>>;
-    if (const auto* v = std::get_if<Stored>(&value)) return static_cast<V>(*v);
+    if (const auto* v = std::get_if<Stored>(&value)) {
+      if constexpr (std::is_integral_v<V> && !std::is_same_v<V, bool>)
+        if (!std::in_range<V>(*v))
+          detail::refuse(Errc::invalid_argument, where() + ": parameter '" + name + "' is " + std::to_string(*v) +
+                                                     ", out of the range of the type it is read as");
+      return static_cast<V>(*v);
+    }
     detail::refuse(Errc::type_mismatch, where() + ": parameter '" + name + "' is " +
                                             std::string{param_type_name(value.index())} + ", read as another type");
   }

@@ -20,6 +20,11 @@ class Registry {
 
   // Throws Errc::in_use when a component of that type is registered already.
   void add(Component component);
+  // As add, for PRIME_COMPONENT (as a program starts or a library loads,
+  // where nothing may throw): what goes wrong is kept for problems().
+  bool declare(Component component) noexcept;
+  // What declare() could not register, in words.
+  [[nodiscard]] std::vector<std::string> problems() const;
   // nullptr when none is.
   [[nodiscard]] const Component* find(std::string_view type) const;
   [[nodiscard]] std::vector<const Component*> components() const;
@@ -27,6 +32,7 @@ class Registry {
  private:
   mutable std::mutex mutex_;
   std::map<std::string, Component, std::less<>> components_;  // never erased: pointers into it stay valid
+  std::vector<std::string> problems_;
 };
 
 }  // namespace prime::system
@@ -38,4 +44,4 @@ class Registry {
 //   PRIME_COMPONENT(robot::planner());
 #define PRIME_COMPONENT(...)                                                \
   [[maybe_unused]] static const bool PRIME_SYSTEM_CONCAT(prime_component_, __COUNTER__) = \
-      (::prime::system::Registry::global().add(__VA_ARGS__), true)
+      ::prime::system::Registry::global().declare(__VA_ARGS__)

@@ -57,7 +57,7 @@ struct SystemSpec {
   std::vector<Instance> instances{};
   std::map<std::string, int> instance_lines{};  // instance, and "instance.param" for each override
   std::map<std::string, Qos> topics{};
-  std::set<std::string> exposed{};  // topics published into the Shm domain whatever reads them
+  std::map<std::string, int> exposed{};  // topics published into the Shm domain whatever reads them, with their lines
   std::map<std::string, std::string> redis{};  // per machine
   std::vector<PlacementSpec> placements{};
 
@@ -77,10 +77,10 @@ SystemSpec load_system(const std::string& path, const std::vector<std::string>& 
 // servers of a service, or a call to a service nobody serves; an instance
 // placed in no process or in two; a link between processes whose type
 // cannot cross them; a process that needs Redis on a machine without it.
-// With `only_known`, instances of components the registry does not know
-// are left out rather than refused (a program that hosts only some).
-std::vector<std::string> problems(const SystemSpec& system, const Registry& registry, std::string_view placement,
-                                  bool only_known = false);
+// An exposed topic whose type cannot leave its process. Every program of
+// a system must know every component of it: where a link goes depends on
+// all its ends.
+std::vector<std::string> problems(const SystemSpec& system, const Registry& registry, std::string_view placement);
 
 // Loads the system's libraries of components (dlopen), so that their
 // PRIME_COMPONENT registrations join the program's registry. Throws
