@@ -411,25 +411,22 @@ class Context {
     return typed<detail::FedInput<T>>(found->second, port);
   }
 
-  // The in-process end of the topic: made by whichever of its ends comes first.
+  // The in-process end of the topic, for readers of values (hub) or of
+  // shared values (shared_hub): made by whichever of its ends comes first.
   template <class T>
   LocalSource<T> hub(const std::string& port, const Qos& qos) {
-    std::scoped_lock lock{links_.mutex};
-    if (const auto found = links_.topics.find(port); found != links_.topics.end())
-      return typed<LocalSource<T>>(found->second, port);
-    LocalSource<T> local{port, qos, links_.local.runtime(), Graph::node(port, "source", "local")};
-    links_.topics.emplace(port, local);
-    return local;
+    return local_end<T>(links_.topics, port, qos);
   }
-
-  // The in-process end of the topic for readers sharing each value.
   template <class T>
   LocalSource<std::shared_ptr<const T>> shared_hub(const std::string& port, const Qos& qos) {
+    return local_end<std::shared_ptr<const T>>(links_.shared, port, qos);
+  }
+  template <class V>
+  LocalSource<V> local_end(std::map<std::string, std::any>& ends, const std::string& port, const Qos& qos) {
     std::scoped_lock lock{links_.mutex};
-    if (const auto found = links_.shared.find(port); found != links_.shared.end())
-      return typed<LocalSource<std::shared_ptr<const T>>>(found->second, port);
-    LocalSource<std::shared_ptr<const T>> local{port, qos, links_.local.runtime(), Graph::node(port, "source", "local")};
-    links_.shared.emplace(port, local);
+    if (const auto found = ends.find(port); found != ends.end()) return typed<LocalSource<V>>(found->second, port);
+    LocalSource<V> local{port, qos, links_.local.runtime(), Graph::node(port, "source", "local")};
+    ends.emplace(port, local);
     return local;
   }
 
