@@ -10,6 +10,10 @@
 //   Linked, Routed     the child serves a and b; the parent calls a | b (a's output goes
 //                      straight to b) or a, then b itself. Both services' workers sleep
 //                      (they share one CPU), so each hop costs a wake-up.
+//   LinkedBusy, RoutedBusy
+//                      the same with the services' workers busy-polling for
+//                      50 µs too, as the caller does: they share the child's
+//                      CPU, so they take turns on it.
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -133,24 +137,26 @@ void BM_Calls_ShmService(benchmark::State& state) {
 }
 BENCHMARK(BM_Calls_ShmService)->Arg(1)->Arg(4)->UseRealTime();
 
+template <bool kBusy>
 void serve_two(ipc::Child& self) {
   shm::Core core{self.arg(0)};
-  const shm::ServiceQos qos{.spin = 0us};
+  const shm::ServiceQos qos{.spin = kBusy ? 50us : 0us};
   (void)core.serve("a", [](const std::uint64_t& x) { return x + 1; }, qos);
   (void)core.serve("b", [](const std::uint64_t& x) { return x * 2; }, qos);
   serve_until_stopped(self);
 }
-const ipc::ChildEntry kServeTwo{"ShmService.serve_two", serve_two};
+const ipc::ChildEntry kServeTwo{"ShmService.serve_two", serve_two<false>};
+const ipc::ChildEntry kServeTwoBusy{"ShmService.serve_two_busy", serve_two<true>};
 
-template <bool kLinked>
+template <bool kLinked, bool kBusy = false>
 void two_services(benchmark::State& state) {
   ipc::run(state, [&](std::size_t) {
     const auto domain = ipc::new_shm_domain();
     shm::Core core{domain};
-    ipc::Link child{"ShmService.serve_two", 64, {}, {domain}};
+    ipc::Link child{kBusy ? "ShmService.serve_two_busy" : "ShmService.serve_two", 64, {}, {domain}};
     child.wait_ready();
     child.go();
-    const shm::ClientQos qos{.timeout = 10s, .wait_for_service = 10s};
+    const shm::ClientQos qos{.timeout = 10s, .wait_for_service = 10s};  // the caller busy-polls (50 µs, the default)
     auto a = core.chain<std::uint64_t, std::uint64_t>("a", qos);
     auto b = core.chain<std::uint64_t, std::uint64_t>("b", qos);
     auto linked = a | b;
@@ -164,7 +170,11 @@ void two_services(benchmark::State& state) {
 }
 void BM_RoundTrip_ShmServicesLinked(benchmark::State& state) { two_services<true>(state); }
 void BM_RoundTrip_ShmServicesRouted(benchmark::State& state) { two_services<false>(state); }
+void BM_RoundTrip_ShmServicesLinkedBusy(benchmark::State& state) { two_services<true, true>(state); }
+void BM_RoundTrip_ShmServicesRoutedBusy(benchmark::State& state) { two_services<false, true>(state); }
 BENCHMARK(BM_RoundTrip_ShmServicesLinked)->Arg(64)->UseRealTime();
 BENCHMARK(BM_RoundTrip_ShmServicesRouted)->Arg(64)->UseRealTime();
+BENCHMARK(BM_RoundTrip_ShmServicesLinkedBusy)->Arg(64)->UseRealTime();
+BENCHMARK(BM_RoundTrip_ShmServicesRoutedBusy)->Arg(64)->UseRealTime();
 
 }  // namespace
