@@ -52,7 +52,7 @@ void BackPressure::wait_for_room_slowly(std::uint64_t after, std::uint64_t next,
     h.space.sleep_until(kPublisherSleeper, plenty, std::min(until, next_check));
     h.space_wanted.store(~0ull, std::memory_order_relaxed);
   };
-  const auto waited = prime::detail::spin_then_sleep(room, sleep, std::chrono::microseconds{50},
+  const auto waited = prime::detail::spin_then_sleep(prime::detail::yielding(room), sleep, std::chrono::microseconds{50},
                                                      deadline_after(block_timeout_), std::stop_token{});
   if (waited == prime::detail::Waited::ready) return;
   give_up_on_laggards(needed, next, in_ring);

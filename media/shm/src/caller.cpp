@@ -237,7 +237,7 @@ std::expected<void, Error> call(const Route& route, const RequestWriter& write, 
     last.service->tail(last.cell).answered.sleep_until(1, answered, std::min(until, Clock::now() + std::chrono::milliseconds{25}));
     if (!answered()) check();
   };
-  (void)prime::detail::spin_then_sleep(over, sleep, route.back()->qos().spin, deadline, std::stop_token{}, now);
+  (void)prime::detail::spin_then_sleep(prime::detail::yielding(over), sleep, route.back()->qos().spin, deadline, std::stop_token{}, now);
   if (!answered()) {
     release_all();
     // A cell a worker held for its output (forwarding) is now abandoned to

@@ -57,7 +57,7 @@ void Server::work(std::size_t index, const std::stop_token& stop) {
                            std::min(until, *next_check));
   };
   while (true) {
-    if (prime::detail::spin_then_sleep(ready, sleep, spin_, Clock::time_point::max(), stop) !=
+    if (prime::detail::spin_then_sleep(prime::detail::yielding(ready), sleep, spin_, Clock::time_point::max(), stop) !=
         prime::detail::Waited::ready)
       return;
     if (auto cell = take(start)) serve(*cell);

@@ -204,7 +204,7 @@ class SubscriptionReader final : public Reader<View<T>>::Impl {
       if (waited == Waited::timeout) return std::unexpected(Error{Errc::held_limit, budget_message() + " until the deadline"});
     }
     auto sleep = [&](Clock::time_point until) { cursor.sleep_until([&] { return stop.stop_requested(); }, until); };
-    const auto waited = prime::detail::spin_then_sleep([&] { return cursor.ready(); }, sleep, spin_, deadline, stop);
+    const auto waited = prime::detail::spin_then_sleep(prime::detail::yielding([&] { return cursor.ready(); }), sleep, spin_, deadline, stop);
     if (waited == Waited::stopped) return std::unexpected(stopped());
     if (waited == Waited::timeout)
       return std::unexpected(Error{Errc::timeout, "source '" + cursor.topic()->name() + "': nothing published in time"});

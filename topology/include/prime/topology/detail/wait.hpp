@@ -21,10 +21,11 @@ inline void cpu_relax() noexcept {
 #endif
 }
 
-// `ready` for spin_then_sleep when what it waits for comes from another
-// thread of this process: every 64th look also yields the core. On a machine
-// with fewer cores than busy threads, a thread spinning on its core may keep
-// the very thread it waits for from running; a yield with no one else to run
+// `ready` for spin_then_sleep that every 64th look also yields the core. On a
+// machine with fewer cores than busy threads, a thread spinning on its core
+// may keep the very thread (of this process or another) it waits for from
+// running: two Shm readers sharing a core, or two services' workers, the
+// second waiting for the first's hand-over. A yield with no one else to run
 // returns at once.
 template <class Ready>
 [[nodiscard]] auto yielding(Ready ready) {
