@@ -85,6 +85,7 @@
 
 #include "harness.hpp"
 #include "payload.hpp"
+#include "sample_sizes.hpp"
 
 namespace {
 
@@ -146,23 +147,10 @@ class SampleType final : public dds::TopicDataType {
   bool is_plain() const override { return true; }
 };
 
-// Calls f.operator()<N>() if `bytes` is N, one of kSizes.
-template <const auto& kSizes, class F, std::size_t... I>
-bool dispatch(std::size_t bytes, F& f, std::index_sequence<I...>) {
-  return ((bytes == static_cast<std::size_t>(kSizes[I]) &&
-           (f.template operator()<static_cast<std::size_t>(kSizes[I])>(), true)) ||
-          ...);
-}
-
-// Calls f.operator()<N>() for N == bytes, if a SampleType<N> is compiled in:
-// for the payload sizes of the latency and throughput benchmarks.
+// A SampleType<N> for N == bytes (sample_sizes.hpp).
 template <class F>
 void with_sample_size(std::size_t bytes, F f) {
-  constexpr auto kLatency = std::size(ipc::kLatencyPayloads);
-  constexpr auto kThroughput = std::size(ipc::kThroughputPayloads);
-  if (!dispatch<ipc::kLatencyPayloads>(bytes, f, std::make_index_sequence<kLatency>{}) &&
-      !dispatch<ipc::kThroughputPayloads>(bytes, f, std::make_index_sequence<kThroughput>{}))
-    throw ipc::PeerError{"no Fast DDS sample type of " + std::to_string(bytes) + " bytes is compiled in"};
+  ipc::with_sample_size(bytes, "Fast DDS", std::move(f));
 }
 
 // ---- configuration -----------------------------------------------------------

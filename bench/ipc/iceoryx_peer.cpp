@@ -44,9 +44,9 @@ using namespace std::chrono_literals;
 // The RouDi, the runtimes and the topic names (iceoryx_runtime.hpp).
 using ipc::iceoryx::ChildRuntimeFiles;
 using ipc::iceoryx::new_topic;
+using ipc::iceoryx::run_on_roudi;
 using ipc::iceoryx::service;
 using ipc::iceoryx::start_child_runtime;
-using ipc::iceoryx::start_iceoryx;
 
 // ---- topics -----------------------------------------------------------------
 
@@ -191,28 +191,6 @@ void attach(iox::popo::WaitSet<>& waitset, iox::popo::UntypedSubscriber& subscri
 
 // ---- the peer ---------------------------------------------------------------
 
-// Whether an Iceoryx run has failed: its child may have died holding the lock
-// of one of its ports, and RouDi then hangs on that lock for good (iceoryx
-// 2.0's port locks are not robust), and so would every later run.
-bool roudi_suspect = false;
-
-// ipc::run for the Iceoryx benchmarks: starts RouDi and this process's
-// runtime first, and runs nothing more once a run has failed.
-template <class Body>
-void run_iceoryx(benchmark::State& state, Body body) {
-  ipc::run(state, [&](std::size_t bytes) {
-    if (roudi_suspect)
-      throw ipc::PeerError{"not run: an earlier Iceoryx run failed, and RouDi may hang on a lock its child held"};
-    start_iceoryx();
-    try {
-      body(bytes);
-    } catch (...) {
-      roudi_suspect = true;
-      throw;
-    }
-  });
-}
-
 // Child: "Iceoryx.echo" busy-polls, "Iceoryx.echo_waitset" sleeps.
 template <bool kSleeps>
 void echo(ipc::Child& self) {
@@ -263,7 +241,7 @@ const ipc::ChildEntry kServe{"Iceoryx.serve", serve};
 
 template <bool kSleeps>
 void latency(benchmark::State& state) {
-  run_iceoryx(state, [&](std::size_t bytes) {
+  run_on_roudi(state, [&](std::size_t bytes) {
     const std::string topic = new_topic();
     iox::popo::UntypedPublisher ping{service(topic, "ping")};
     iox::popo::UntypedSubscriber pong{service(topic, "pong")};
@@ -289,14 +267,14 @@ BENCHMARK(BM_Latency_Iceoryx)->Apply(ipc::latency_payloads);
 BENCHMARK(BM_Latency_IceoryxWaitSet)->Arg(64)->UseRealTime();
 
 void BM_Throughput_Iceoryx(benchmark::State& state) {
-  run_iceoryx(state, [&](std::size_t bytes) {
+  run_on_roudi(state, [&](std::size_t bytes) {
     const std::string topic = new_topic();
     iox::popo::UntypedSubscriber in{service(topic, "stream"), blocking_subscriber()};
     const ChildRuntimeFiles files{topic};
     ipc::Link child{"Iceoryx.stream", bytes, {}, {topic}};
     // The child may be blocked on a full queue: keep taking until it is gone
     // (a child killed inside publish() would leave RouDi hanging, see
-    // run_iceoryx), and leave nothing queued for RouDi to clean up.
+    // run_on_roudi), and leave nothing queued for RouDi to clean up.
     child.set_drain([&] { drain(in); });
     child.wait_ready();
     ipc::sleep_until(child, [&] { return subscribed(in); });
@@ -309,7 +287,7 @@ void BM_Throughput_Iceoryx(benchmark::State& state) {
 BENCHMARK(BM_Throughput_Iceoryx)->Apply(ipc::throughput_payloads);
 
 void BM_RoundTrip_Iceoryx(benchmark::State& state) {
-  run_iceoryx(state, [&](std::size_t bytes) {
+  run_on_roudi(state, [&](std::size_t bytes) {
     const std::string topic = new_topic();
     iox::popo::UntypedClient client{service(topic, "rpc"), lossless_client()};
     const ChildRuntimeFiles files{topic};

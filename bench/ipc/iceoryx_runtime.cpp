@@ -44,8 +44,13 @@ constexpr const char* kRoudiReady = "RouDi is ready for clients";
 // which would otherwise take the next larger pool's (a 1 MiB request a 4 MiB
 // chunk) or, with none larger, abort the process: iceoryx 2.0 treats a chunk
 // too large for every pool as fatal (MEPOO__MEMPOOL_GETCHUNK_CHUNK_IS_TOO_LARGE)
-// instead of failing the loan. RouDi writes zeros over all of it: about
-// 460 MiB of /dev/shm while it runs.
+// instead of failing the loan. Cyclone DDS's chunks carry its own header
+// (56 B; 108 B with the payload's offset and alignment) before the N bytes,
+// so its round trips take the pools of N + 1 KiB too (64 B: 4 KiB's), up
+// to four chunks a direction (the one loaned, one queued, one in the
+// reader's history, and the last one sent, which an iceoryx publisher
+// keeps): 16 of each, and a pool for 4 MiB + 1 KiB. RouDi writes zeros over
+// all of it: about 530 MiB of /dev/shm while it runs.
 constexpr const char* kRoudiConfig = R"(# Written by prime_ipc for the RouDi it starts.
 [general]
 version = 1
@@ -62,7 +67,7 @@ count = 64
 
 [[segment.mempool]]
 size = 5120
-count = 8
+count = 16
 
 [[segment.mempool]]
 size = 65536
@@ -70,7 +75,7 @@ count = 64
 
 [[segment.mempool]]
 size = 66560
-count = 8
+count = 16
 
 [[segment.mempool]]
 size = 1048576
@@ -78,10 +83,14 @@ count = 320
 
 [[segment.mempool]]
 size = 1049600
-count = 8
+count = 16
 
 [[segment.mempool]]
 size = 4194304
+count = 16
+
+[[segment.mempool]]
+size = 4195328
 count = 16
 )";
 

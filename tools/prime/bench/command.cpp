@@ -126,6 +126,7 @@ std::vector<std::string> list(const Suite& suite, const std::filesystem::path& b
   for (const auto& [part, reason] : suite.expected)
     if (std::none_of(names.begin(), names.end(), [&](const std::string& n) { return n.find(part) != std::string::npos; }))
       results.skipped.push_back({suite.name, "BM" + part + "*", reason});
+  for (const auto& [benchmark, reason] : suite.not_measured) results.skipped.push_back({suite.name, benchmark, reason});
   return names;
 }
 

@@ -28,6 +28,10 @@ struct Suite {
   // Benchmarks (a part of their names) a full build has, with the reason
   // to report when the binary lacks them (a peer it was built without).
   std::vector<std::pair<std::string, std::string>> expected = {};
+  // Benchmarks no build has, as a peer cannot do what they measure, each
+  // with the reason: always listed as skipped, so that the report says why
+  // a row is missing.
+  std::vector<std::pair<std::string, std::string>> not_measured = {};
   // Environment the quick mode gives the binary (fewer requests, say).
   std::vector<std::pair<std::string, std::string>> quick_env = {};
   // Adds the figures of one benchmark's result (a Google Benchmark JSON
