@@ -105,6 +105,12 @@ Reader<View<Bytes>> Core::observe(const std::string& name) {
       detail::existing_topic(registry_, name), SubscribeQos{.spin = std::chrono::microseconds{0}}, runtime(), true)};
 }
 
+Reader<View<Bytes>> Core::raw_subscribe(const std::string& name, SubscribeQos qos) {
+  auto topic = detail::existing_topic(registry_, name);
+  qos.history = std::min<std::size_t>(qos.history, topic->header().capacity);
+  return Reader<View<Bytes>>{std::make_unique<SubscriptionReader<Bytes>>(std::move(topic), qos, runtime())};
+}
+
 Publisher<Bytes> Core::raw_publisher(const std::string& name) {
   return Publisher<Bytes>{detail::existing_topic(registry_, name), std::chrono::milliseconds{1000}, PublishFence::full, {}};
 }

@@ -198,6 +198,13 @@ class Core : public ErasedChainRuntime {
   // hold them briefly. Throws Errc::not_found when there is no such topic.
   [[nodiscard]] Reader<View<Bytes>> observe(const std::string& name);
 
+  // For bindings that know a type only at run time (Python): a subscriber
+  // of topic `name` whatever its type, reading each sample's bytes in place.
+  // A real subscriber, unlike observe(): it takes one of the topic's
+  // subscriber slots, and a `block` publisher waits for it. Throws
+  // Errc::not_found when there is no such topic, and as subscribe() does.
+  [[nodiscard]] Reader<View<Bytes>> raw_subscribe(const std::string& name, SubscribeQos qos = {});
+
   // For tools: publishes on topic `name` whatever its type, as raw bytes
   // (the type's size, laid out as its description says). The topic must
   // exist (its type is its own) and have no live publisher.

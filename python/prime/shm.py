@@ -1,0 +1,191 @@
+"""Prime's Shm medium from Python: topics read in place in shared memory, as
+numpy views with no copy, topics published, services called.
+
+    import prime
+    d = prime.shm.Domain("robot")               # a participant, listed by `prime ls`
+    odom = d.subscribe("sensors/odom")
+    with odom.read(timeout=1.0) as s:          # prime.Timeout if nothing comes
+        print(s.value["x"], s.stamp, s.sequence)
+
+A described type (PRIME_DESCRIBE) arrives as a read-only 0-d numpy structured
+array over the sample's bytes where the publisher wrote them; a raw topic as
+a read-only memoryview. The sample stays held in the topic's ring (counted
+in the topic's max_held) until the Sample is released (the end of its
+`with` block, or release()) and no array or memoryview made from it lives.
+"""
+
+import re as _re
+
+import numpy as _np
+
+import prime as _prime
+from prime._prime import Core as _Core
+
+
+class Sample:
+    """One sample: .value (a numpy view or a memoryview), .stamp (seconds of
+    the steady clock C++'s prime::Clock reads), .sequence."""
+
+    def __init__(self, held, dtype, topic):
+        self._held, self._dtype, self._topic = held, dtype, topic
+        self.stamp, self.sequence = held.stamp, held.sequence
+
+    @property
+    def value(self):
+        if self._held is None:
+            raise ValueError(f"a sample of topic '{self._topic}' used after its release")
+        if self._dtype is None:
+            return memoryview(self._held)
+        if self._held.size != self._dtype.itemsize:
+            raise _prime.Damaged("damaged", f"a sample of topic '{self._topic}' has {self._held.size} bytes, "
+                                            f"its type {self._dtype.itemsize}")
+        return _np.frombuffer(self._held, dtype=self._dtype, count=1).reshape(())
+
+    def release(self):
+        """Gives the sample back (once no array made from it lives)."""
+        self._held = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+        return False
+
+
+def _topic(core, name):
+    """Topic `name`'s name, type and dtype (None: raw bytes; an undescribed
+    type: its bytes, V<size>)."""
+    info = core.topic(name)
+    if info is None:
+        raise _prime.NotFound("not found", f"no topic '{name}' in shm domain '{core.domain}'")
+    return name, info["type"], _dtype(info["raw"], info["schema"], info["size"])
+
+
+def _dtype(raw, schema, size):
+    return None if raw else (_prime.dtype_of(schema, size) or _np.dtype(f"V{size}"))
+
+
+class Subscriber:
+    """A real subscriber of a topic (a `block` publisher waits for it)."""
+
+    def __init__(self, core, name, history, spin):
+        self.name, self.type, self.dtype = _topic(core, name)
+        self._reader = core.subscribe(name, history, spin)
+
+    def read(self, timeout=None):
+        """The next sample; waits up to `timeout` seconds (None: until one
+        comes, or Ctrl-C). Raises prime.Timeout."""
+        return Sample(self._reader.read(timeout), self.dtype, self.name)
+
+    def try_read(self):
+        """The next sample if one is there, else None."""
+        held = self._reader.try_read()
+        return None if held is None else Sample(held, self.dtype, self.name)
+
+    def __iter__(self):
+        while True:
+            yield self.read()
+
+    @property
+    def lost(self):
+        return self._reader.lost
+
+
+class Publisher:
+    """The publisher of an existing topic (its type is the topic's)."""
+
+    def __init__(self, core, name):
+        self.name, self.type, self.dtype = _topic(core, name)
+        self._publisher = core.publisher(name)
+
+    def message(self):
+        """A zeroed message of the topic's type, to fill and publish."""
+        if self.dtype is None:
+            raise _prime.InvalidArgument("invalid argument", f"topic '{self.name}' carries raw bytes: publish bytes")
+        return _np.zeros((), dtype=self.dtype)
+
+    def publish(self, value, stamp=None):
+        """Publishes `value` (copied once into shared memory): a numpy array
+        of the topic's dtype, a dict of its fields, or bytes for a raw
+        topic. `stamp`: seconds of the steady clock (default: now)."""
+        self._publisher.publish(_message_bytes(value, self.dtype, f"topic '{self.name}' ({self.type})"), stamp)
+
+
+class Domain:
+    """A participant of the shared-memory domain `name`, listed by `prime ls`
+    under `participant` (default: the program's name)."""
+
+    def __init__(self, name, participant=""):
+        self._core = _Core(name, participant)
+        self._clients = {}
+        self.name = name
+
+    def subscribe(self, topic, history=0, spin=50e-6):
+        """A subscriber of `topic` (which must exist), whatever its type."""
+        return Subscriber(self._core, topic, history, spin)
+
+    def publisher(self, topic):
+        """The publisher of `topic` (which must exist), whatever its type."""
+        return Publisher(self._core, topic)
+
+    def call(self, service, request, timeout=None):
+        """Calls `service` with `request` (a numpy array or dict of its request
+        type, or bytes for raw) and returns its reply (a numpy array of its
+        reply type, or bytes), waiting up to `timeout` seconds (None: the
+        service's own): prime.Timeout, prime.NotFound, prime.PeerDead,
+        prime.BlockFailed... as in C++."""
+        key = (service, timeout)
+        if key not in self._clients:
+            info = self._core.service(service)
+            if info is None:
+                raise _prime.NotFound("not found", f"no service '{service}' in shm domain '{self.name}'")
+            self._clients[key] = (self._core.client(service, timeout), _TypeOf(info, "request", service),
+                                  _TypeOf(info, "reply", service))
+        client, request_type, reply_type = self._clients[key]
+        return reply_type.value_of(client.call(request_type.bytes_of(request)))
+
+
+class _TypeOf:
+    """One way of a service: bytes to and from its type."""
+
+    def __init__(self, info, way, service):
+        self.type, self.service, self.way = info[way + "_type"], service, way
+        self.dtype = _dtype(info[way + "_raw"], info[way + "_schema"], _size_of(self.type))
+
+    def bytes_of(self, value):
+        return _message_bytes(value, self.dtype, f"service '{self.service}' ({self.type} {self.way})")
+
+    def value_of(self, data):
+        if self.dtype is None:
+            return data
+        return _np.frombuffer(data, dtype=self.dtype, count=1).reshape(())
+
+
+def _message_bytes(value, dtype, where):
+    """`value` as the bytes of one message of `dtype` (None: raw bytes): a
+    numpy array of that dtype, or a dict of its fields. `where` names the
+    topic or service in the error."""
+    if dtype is None:
+        return memoryview(value).cast("B")
+    if isinstance(value, dict):
+        message = _np.zeros((), dtype=dtype)
+        for field, v in value.items():
+            if field not in dtype.names:
+                raise _prime.TypeMismatch("type mismatch", f"{where} has no field '{field}'; it has "
+                                                           f"{', '.join(dtype.names)}")
+            message[field] = v
+        value = message
+    value = _np.asarray(value)
+    if value.dtype != dtype or value.size != 1:
+        raise _prime.TypeMismatch("type mismatch", f"{where} takes one message of dtype {dtype}, not "
+                                                   f"{value.size} of dtype {value.dtype}")
+    return _np.ascontiguousarray(value).reshape(-1).view(_np.uint8)
+
+
+def _size_of(type_name):
+    # Fingerprint::describe(): "<name> (<size> bytes, align ..., layout ...)"
+    found = _re.search(r"\((\d+) bytes", type_name)
+    if not found:
+        raise _prime.Damaged("damaged", f"a type described as {type_name!r} names no size")
+    return int(found.group(1))

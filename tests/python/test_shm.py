@@ -1,0 +1,189 @@
+"""The prime Python package against C++ processes (tests/python/peer.cpp),
+both ways: topics read in place and published, services called, and every
+error as its prime exception. Run by CTest (tests/python/CMakeLists.txt),
+which puts the built package on PYTHONPATH and names the peer and the tool."""
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+import prime
+
+PEER = os.environ["PRIME_PY_PEER"]
+TOOL = os.environ.get("PRIME_TOOL")
+_domains = itertools.count()
+
+
+@pytest.fixture
+def domain():
+    return f"py-{os.getpid()}-{next(_domains)}"
+
+
+class Peer:
+    """A peer process; says its lines on stdout, stops when stdin closes."""
+
+    def __init__(self, *args):
+        self.process = subprocess.Popen([PEER, *map(str, args)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        text=True)
+        self.expect("ready")
+
+    def expect(self, line):
+        got = self.process.stdout.readline().strip()
+        assert got == line, f"the peer said {got!r}, not {line!r}"
+
+    def say(self, line):
+        self.process.stdin.write(line + "\n")
+        self.process.stdin.flush()
+
+    def close(self, timeout=10):
+        if self.process.stdin and not self.process.stdin.closed:
+            self.process.stdin.close()
+        return self.process.wait(timeout)
+
+    def kill(self):
+        self.process.kill()
+        self.process.wait(10)
+
+
+def shm_mappings():
+    """The address ranges of this process's mappings of Prime's segments."""
+    ranges = []
+    with open("/proc/self/maps") as maps:
+        for line in maps:
+            fields = line.split()
+            if len(fields) >= 6 and fields[5].startswith("/dev/shm/prime."):
+                start, end = (int(x, 16) for x in fields[0].split("-"))
+                ranges.append((start, end))
+    return ranges
+
+
+def test_described_samples_from_cpp_are_numpy_views_in_shared_memory(domain):
+    peer = Peer("publish", domain, 5)
+    d = prime.shm.Domain(domain, participant="pytest")
+    poses = d.subscribe("pose")
+    assert poses.dtype.names == ("x", "y", "id", "frame", "v")
+    peer.say("go")
+    peer.expect("done")
+    kept = []
+    for i in range(1, 6):
+        with poses.read(timeout=5) as s:
+            v = s.value
+            assert v.shape == () and not v.flags.owndata
+            assert (float(v["x"]), float(v["y"]), int(v["id"])) == (i / 2, -i, i)
+            assert bytes(v["frame"]["data"])[: int(v["frame"]["size"])] == b"map"
+            assert list(v["v"]) == [i, 2 * i, 3 * i]
+            assert s.sequence == i - 1  # the topic's sequence, from 0
+            address = v.ctypes.data
+            assert any(start <= address < end for start, end in shm_mappings()), "read in place in /dev/shm"
+            with pytest.raises(ValueError):
+                v["x"] = 0.0  # read-only: the publisher's bytes
+            kept.append(v)
+        with pytest.raises(ValueError, match="after its release"):
+            s.value
+    # An array outlives its with block: its sample stays held, so it still reads the same.
+    assert [int(v["id"]) for v in kept] == [1, 2, 3, 4, 5]
+    with pytest.raises(prime.Timeout) as timeout:
+        poses.read(timeout=0.05)
+    assert timeout.value.code == "timeout"
+    assert poses.try_read() is None
+    assert peer.close() == 0
+
+
+def test_python_publishes_to_a_cpp_subscriber(domain):
+    peer = Peer("subscribe", domain, 4)
+    d = prime.shm.Domain(domain)
+    commands = d.publisher("command")
+    commands.publish({"value": 1, "gain": 0.25})
+    message = commands.message()
+    for i in range(2, 5):
+        message["value"], message["gain"] = i, i / 4
+        commands.publish(message)
+    peer.expect("ok 4")
+    assert peer.close() == 0
+
+
+def test_a_wrong_type_is_refused_by_name(domain):
+    peer = Peer("subscribe", domain, 1)
+    d = prime.shm.Domain(domain)
+    commands = d.publisher("command")
+    with pytest.raises(prime.TypeMismatch, match="command"):
+        commands.publish(np.zeros((), dtype=[("value", "<i4")]))
+    with pytest.raises(prime.TypeMismatch, match="no field .speed."):
+        commands.publish({"speed": 3})
+    with pytest.raises(prime.TypeMismatch, match="one message"):
+        commands.publish(np.zeros(3, dtype=commands.dtype))
+    with pytest.raises(prime.NotFound, match="no topic 'nothing'"):
+        d.subscribe("nothing")
+    commands.publish({"value": 1, "gain": 0.25})  # nothing else was lost
+    peer.expect("ok 1")
+    peer.close()
+
+
+def test_calls_to_a_cpp_service_and_its_errors(domain):
+    peer = Peer("serve", domain)
+    d = prime.shm.Domain(domain)
+    reply = d.call("double", {"value": 21, "gain": 0.5}, timeout=5)
+    assert (int(reply["value"]), float(reply["gain"])) == (42, 1.0)
+    with pytest.raises(prime.BlockFailed, match="no motors") as failed:
+        d.call("fail", {"value": 1, "gain": 1.0}, timeout=5)
+    assert failed.value.code == "block failed"
+    with pytest.raises(prime.NotFound):
+        d.call("nobody", b"", timeout=1)
+    with pytest.raises(prime.TypeMismatch):
+        d.call("double", np.zeros(3), timeout=5)
+    peer.kill()  # kill -9: a dead server is an error, not a hang
+    with pytest.raises((prime.NotFound, prime.PeerDead)):
+        d.call("double", {"value": 1, "gain": 1.0}, timeout=2)
+
+
+@pytest.mark.skipif(TOOL is None, reason="the prime tool is not built")
+def test_prime_ls_lists_the_python_participant(domain):
+    peer = Peer("publish", domain, 1)
+    d = prime.shm.Domain(domain, participant="planner-py")
+    listing = subprocess.run([TOOL, "ls", "--domain", domain], capture_output=True, text=True, check=True).stdout
+    rows = [line.split() for line in listing.splitlines()]
+    assert ["planner-py", str(os.getpid()), "yes"] in [row[:3] for row in rows]
+    del d
+    peer.close()
+
+
+def test_ctrl_c_ends_a_blocking_read(domain):
+    peer = Peer("publish", domain, 1)
+    script = textwrap.dedent(f"""
+        import prime
+        d = prime.shm.Domain({domain!r})
+        poses = d.subscribe("pose", spin=0)
+        try:
+            print("waiting", flush=True)
+            poses.read()
+        except KeyboardInterrupt:
+            print("interrupted", flush=True)
+    """)
+    reader = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    assert reader.stdout.readline().strip() == "waiting"
+    # Asleep in read(): its one thread is in futex(2), syscall 202 on x86-64.
+    deadline = time.monotonic() + 10
+    while not open(f"/proc/{reader.pid}/syscall").read().startswith("202 "):
+        assert time.monotonic() < deadline, "the reader never slept in read()"
+    reader.send_signal(signal.SIGINT)
+    assert reader.stdout.readline().strip() == "interrupted"
+    assert reader.wait(10) == 0
+    peer.close()
+
+
+def test_schemas_make_dtypes_field_by_field():
+    dtype = prime.dtype_of("{x@0:f64,n@8:vec4@0,8,4(i32),s@32:str7@0,4,a@44:arr2,8({p@0:u8,q@4:f32})}", 64)
+    assert dtype.itemsize == 64 and dtype.names == ("x", "n", "s", "a")
+    assert dtype.fields["n"][1] == 8 and dtype["n"]["data"].shape == (4,)
+    assert dtype["a"].shape == (2,) and dtype["a"].base.itemsize == 8
+    with pytest.raises(ValueError, match="unknown type"):
+        prime.dtype_of("{x@0:f65}", 8)
+    with pytest.raises(ValueError, match="past its type"):
+        prime.dtype_of("{x@0:f64,y@8:f64}", 8)
