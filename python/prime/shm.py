@@ -15,6 +15,7 @@ in the topic's max_held) until the Sample is released (the end of its
 """
 
 import re as _re
+import sys as _sys
 
 import numpy as _np
 
@@ -110,6 +111,85 @@ class Publisher:
         of the topic's dtype, a dict of its fields, or bytes for a raw
         topic. `stamp`: seconds of the steady clock (default: now)."""
         self._publisher.publish(_message_bytes(value, self.dtype, f"topic '{self.name}' ({self.type})"), stamp)
+
+    def loan(self, size=None):
+        """A message loaned in shared memory, to write in place and publish
+        (see Loan). `size`: the bytes of a raw topic's message."""
+        if self.dtype is not None and size is not None:
+            raise _prime.InvalidArgument("invalid argument", f"topic '{self.name}' carries {self.type}: its size "
+                                                             "is the type's")
+        if self.dtype is None and size is None:
+            raise _prime.InvalidArgument("invalid argument", f"topic '{self.name}' carries raw bytes: give a size")
+        loaned = self._publisher.loan(self.dtype.itemsize if size is None else size)
+        return Loan(loaned, self.dtype, f"topic '{self.name}'")
+
+
+class Loan:
+    """A message loaned in the topic's ring in shared memory, written in
+    place, and published at the end of its `with` block (given back,
+    unpublished, if the block raises):
+
+        with pub.loan() as msg:
+            msg["x"] = 1.0
+            msg["image"]["data"][:n] = pixels   # no copy but this one
+
+    `msg[field]` reads and writes a field; `msg.value` is the whole message
+    (a writable 0-d numpy array; raw topics: a uint8 array). An array made
+    from the loan must be gone when it is published: one still alive would
+    write into a sample other processes read, so the loan is given back
+    unpublished and prime.InUse raised. After the block, `msg` refuses use."""
+
+    def __init__(self, loan, dtype, where):
+        self._loan, self._where = loan, where
+        self._flat = _np.frombuffer(loan, dtype=dtype or _np.uint8, count=-1 if dtype is None else 1)
+        self._value = self._flat if dtype is None else self._flat.reshape(())
+
+    @property
+    def value(self):
+        if self._value is None:
+            raise ValueError(f"a loan of {self._where} used after it was published or given back")
+        return self._value
+
+    def __getitem__(self, key):
+        return self.value[key]
+
+    def __setitem__(self, key, item):
+        self.value[key] = item
+
+    def publish(self, stamp=None):
+        """Publishes the message (`stamp`: seconds of the steady clock; default now)."""
+        self.value  # noqa: B018  (refuses a loan already ended)
+        self._value = None
+        # Every array over the loan refers to _flat: with none alive but this
+        # object's own, the count is 2 (the attribute and getrefcount's argument).
+        if _sys.getrefcount(self._flat) > 2:
+            self._end()
+            raise _prime.InUse("in use", f"an array made from the loan of {self._where} is still alive: it "
+                                         "would write into a published sample, so the loan was given back, "
+                                         "unpublished")
+        self._flat = None
+        self._loan.publish(stamp)
+
+    def give_back(self):
+        """Ends the loan unpublished."""
+        self._value = None
+        self._end()
+
+    def _end(self):
+        self._flat = None
+        self._loan.give_back()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, error, *rest):
+        if error is not None:
+            if self._value is not None:
+                self.give_back()
+            return False
+        if self._value is not None:
+            self.publish()
+        return False
 
 
 class Domain:

@@ -102,6 +102,28 @@ struct Publisher {
   }
 };
 
+// A message loaned in the topic's ring, written in place through its
+// exported (writable) bytes, then published or given back. prime/shm.py
+// publishes only once no array over the bytes lives.
+struct LoanedMessage {
+  Publisher* publisher;
+  std::optional<shm::Loan<shm::Bytes>> loan;
+
+  void publish(std::optional<double> stamp) {
+    if (!loan) throw prime::Failure{{prime::Errc::invalid_argument, "this loan was published or given back already"}};
+    std::scoped_lock lock{publisher->mutex};
+    std::move(*loan).publish(stamp ? Clock::time_point{std::chrono::duration_cast<Clock::duration>(
+                                         std::chrono::duration<double>{*stamp})}
+                                   : Clock::now());
+    loan.reset();
+  }
+
+  void give_back() {
+    std::scoped_lock lock{publisher->mutex};
+    loan.reset();
+  }
+};
+
 struct Client {
   shm::ServiceChain<shm::Bytes, shm::Bytes> chain;
 
@@ -169,7 +191,31 @@ PYBIND11_MODULE(_prime, m) {
       .def("try_read", &Subscriber::try_read)
       .def_property_readonly("lost", [](Subscriber& s) { return s.reader.lost(); });
 
-  py::class_<Publisher>(m, "Publisher").def("publish", &Publisher::publish, py::arg("data"), py::arg("stamp") = py::none());
+  py::class_<Publisher>(m, "Publisher")
+      .def("publish", &Publisher::publish, py::arg("data"), py::arg("stamp") = py::none())
+      .def(
+          "loan",
+          [](Publisher& p, std::size_t size) {
+            std::optional<std::expected<shm::Loan<shm::Bytes>, prime::Error>> got;
+            {
+              py::gil_scoped_release release;  // a `block` topic may make it wait for room
+              std::scoped_lock lock{p.mutex};
+              got.emplace(p.publisher.loan(size));
+            }
+            if (!*got) throw prime::Failure{got->error()};
+            return std::make_unique<LoanedMessage>(LoanedMessage{&p, std::move(**got)});
+          },
+          py::arg("size"), py::keep_alive<0, 1>());
+
+  py::class_<LoanedMessage>(m, "Loan", py::buffer_protocol())
+      .def_buffer([](LoanedMessage& l) {
+        if (!l.loan) throw py::buffer_error("this loan was published or given back already");
+        const auto bytes = l.loan->bytes();
+        return py::buffer_info(bytes.data(), 1, py::format_descriptor<std::uint8_t>::format(), 1,
+                               {static_cast<py::ssize_t>(bytes.size())}, {1}, /*readonly=*/false);
+      })
+      .def("publish", &LoanedMessage::publish, py::arg("stamp") = py::none())
+      .def("give_back", &LoanedMessage::give_back);
 
   py::class_<Client>(m, "Client").def("call", &Client::call, py::arg("request"));
 

@@ -102,9 +102,25 @@ def test_python_publishes_to_a_cpp_subscriber(domain):
     commands = d.publisher("command")
     commands.publish({"value": 1, "gain": 0.25})
     message = commands.message()
-    for i in range(2, 5):
-        message["value"], message["gain"] = i, i / 4
-        commands.publish(message)
+    message["value"], message["gain"] = 2, 0.5
+    commands.publish(message)
+    with commands.loan() as loaned:  # written in place in the ring, published at the end of the block
+        assert any(start <= loaned.value.ctypes.data < end for start, end in shm_mappings())
+        loaned["value"], loaned["gain"] = 3, 0.75
+    with pytest.raises(ValueError, match="after it was published"):
+        loaned["value"] = 0
+    with pytest.raises(prime.InUse, match="still alive"):
+        with commands.loan() as loaned:
+            kept = loaned.value  # would write into a published sample: refused, and nothing published
+            loaned["value"] = 99
+    with pytest.raises(RuntimeError):
+        with commands.loan() as loaned:
+            loaned["value"] = 98
+            raise RuntimeError("the block failed: its loan is given back, unpublished")
+    del kept
+    with commands.loan() as loaned:
+        loaned.value["value"] = 4
+        loaned["gain"] = 1.0
     peer.expect("ok 4")
     assert peer.close() == 0
 
