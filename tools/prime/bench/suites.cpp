@@ -328,6 +328,16 @@ std::vector<Suite> suites() {
        .full_repetitions = 3,
        .quick_env = {{"PRIME_RECORD_SECONDS", "0.3"}},
        .read = read_record},
+      // Latency_ShmToPython and Throughput_ShmToPython: rows beside ipc's
+      // Latency_Shm and Throughput_Shm (C++ to C++) of the same run.
+      {.name = "python",
+       .title = "C++ to Python: Shm samples read in place through numpy",
+       .binary = "python/prime_python_bench",
+       .quick_filter = ".",
+       .quick_min_time = 0.05,
+       .full_min_time = 0.3,
+       .full_repetitions = 3,
+       .read = read_ipc},
       {.name = "system",
        .title = "components: sensor to command in each placement, against the pipeline wired by hand",
        .binary = "system/prime_system_bench",

@@ -1,0 +1,32 @@
+"""The Python end of prime_python_bench (python_bench.cpp): reads what the
+C++ parent publishes on a raw topic, in place, through numpy.
+
+    reader.py latency DOMAIN   each sample on "ping": answers on "pong" with its
+                               sequence (its first 8 bytes) and when it was read
+                               (CLOCK_MONOTONIC ns: C++'s steady_clock)
+    reader.py stream DOMAIN    every sample on "stream": answers on "pong" with the
+                               last sequence every 256 samples
+"""
+
+import sys
+import time
+
+import numpy as np
+
+import prime
+
+mode, domain = sys.argv[1], sys.argv[2]
+d = prime.shm.Domain(domain, participant="bench-python")
+source = d.subscribe("ping" if mode == "latency" else "stream")
+pong = d.publisher("pong")
+answer = np.zeros(2, dtype="<u8")
+print("ready", flush=True)
+for n, sample in enumerate(source, 1):
+    with sample:
+        seq = int(np.frombuffer(sample.value, dtype="<u8", count=1)[0])  # read where the parent wrote it
+    if mode == "latency":
+        answer[0], answer[1] = seq, time.clock_gettime_ns(time.CLOCK_MONOTONIC)
+        pong.publish(answer.view(np.uint8))
+    elif n % 256 == 0:
+        answer[0] = seq
+        pong.publish(answer.view(np.uint8))
