@@ -6,11 +6,14 @@
 //   Latency_ShmToPython/<bytes>     one sample at a time on a raw topic: the
 //       parent publishes (its sequence in the first 8 bytes), Python reads it
 //       and answers with the steady clock's time it read it; a sample is that
-//       time minus the publish stamp, one way (p50_ns ...). Flat from 64 B to
-//       1 MiB: nothing is copied on the way.
+//       time minus the publish stamp, one way (p50_ns ...; prime_ipc's
+//       Latency_Shm is half a round trip). Flat from 64 B to 1 MiB: nothing
+//       is copied on the way.
 //   Throughput_ShmToPython/<bytes>  the parent publishes flat out on a `block`
 //       topic; msgs/s is the rate Python reads every sample at, losslessly.
 #include <benchmark/benchmark.h>
+#include <fcntl.h>
+#include <poll.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -20,7 +23,6 @@
 #include <cerrno>
 #include <chrono>
 #include <cstdint>
-#include <cstdio>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -43,7 +45,7 @@ class PythonReader {
  public:
   PythonReader(const std::string& mode, const std::string& domain) {
     int out[2];
-    if (::pipe(out) != 0) throw std::system_error{errno, std::generic_category(), "pipe"};
+    if (::pipe2(out, O_CLOEXEC) != 0) throw std::system_error{errno, std::generic_category(), "pipe"};
     posix_spawn_file_actions_t actions;
     posix_spawn_file_actions_init(&actions);
     posix_spawn_file_actions_adddup2(&actions, out[1], STDOUT_FILENO);
@@ -64,22 +66,38 @@ class PythonReader {
       ::close(out[0]);
       throw std::system_error{spawned, std::generic_category(), "starting " + python};
     }
-    output_ = ::fdopen(out[0], "r");
-    char line[64] = {};
-    if (!output_ || !std::fgets(line, sizeof line, output_) || std::string{line} != "ready\n")
-      throw std::runtime_error{"the Python reader did not start (is the prime package built?)"};
+    output_ = out[0];
+    if (!said_ready()) {
+      stop();
+      throw std::runtime_error{"the Python reader did not start within 30 s (is the prime package built?)"};
+    }
   }
-  ~PythonReader() {
-    ::kill(pid_, SIGKILL);
-    ::waitpid(pid_, nullptr, 0);
-    if (output_) std::fclose(output_);
-  }
+  ~PythonReader() { stop(); }
   PythonReader(const PythonReader&) = delete;
   PythonReader& operator=(const PythonReader&) = delete;
 
  private:
+  // Whether the reader writes "ready\n" within 30 s.
+  bool said_ready() const {
+    std::string said;
+    const auto deadline = Clock::now() + 30s;
+    while (said.size() < 6 && Clock::now() < deadline) {
+      pollfd p{.fd = output_, .events = POLLIN, .revents = 0};
+      if (::poll(&p, 1, 100) <= 0) continue;
+      char c;
+      if (::read(output_, &c, 1) != 1) return false;
+      said += c;
+    }
+    return said == "ready\n";
+  }
+  void stop() {
+    ::kill(pid_, SIGKILL);
+    ::waitpid(pid_, nullptr, 0);
+    ::close(output_);
+  }
+
   pid_t pid_ = 0;
-  std::FILE* output_ = nullptr;
+  int output_ = -1;
 };
 
 std::string new_domain() {
@@ -98,6 +116,7 @@ Answer wait_for(prime::Reader<shm::View<shm::Bytes>>& pong, std::uint64_t seq) {
   const auto deadline = Clock::now() + 10s;
   while (Clock::now() < deadline) {
     if (auto s = pong.try_read()) {
+      if (s->value.bytes().size() != sizeof(Answer)) throw std::runtime_error{"the Python reader answered a wrong size"};
       Answer a;
       std::memcpy(&a, s->value.bytes().data(), sizeof a);
       if (a.seq >= seq) return a;
@@ -132,7 +151,8 @@ void BM_Latency_ShmToPython(benchmark::State& state) try {
     const auto answer = wait_for(pong, seq);
     const auto one_way = static_cast<std::int64_t>(answer.read_ns) -
                          std::chrono::duration_cast<std::chrono::nanoseconds>(sent.time_since_epoch()).count();
-    samples.push_back(static_cast<std::uint32_t>(std::clamp<std::int64_t>(one_way, 0, UINT32_MAX)));
+    if (one_way < 0) throw std::runtime_error{"Python read a sample before it was published: the clocks differ"};
+    samples.push_back(static_cast<std::uint32_t>(std::min<std::int64_t>(one_way, UINT32_MAX)));
   }
   auto at = [&](double q) {
     const auto k = std::min(samples.size() - 1, static_cast<std::size_t>(q * static_cast<double>(samples.size())));
@@ -159,7 +179,7 @@ void BM_Throughput_ShmToPython(benchmark::State& state) try {
   std::uint64_t seq = 0;
   auto round = [&] {
     for (std::uint64_t i = 0; i < kRound; ++i) publish(stream, bytes, ++seq, Clock::now());
-    (void)wait_for(pong, seq);
+    if (wait_for(pong, seq).read_ns != 0) throw std::runtime_error{"the Python reader missed a sample"};
   };
   round();  // warm
   const auto start = Clock::now();

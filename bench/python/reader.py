@@ -4,8 +4,9 @@ C++ parent publishes on a raw topic, in place, through numpy.
     reader.py latency DOMAIN   each sample on "ping": answers on "pong" with its
                                sequence (its first 8 bytes) and when it was read
                                (CLOCK_MONOTONIC ns: C++'s steady_clock)
-    reader.py stream DOMAIN    every sample on "stream": answers on "pong" with the
-                               last sequence every 256 samples
+    reader.py stream DOMAIN    every sample on "stream", which must come in order with
+                               none lost: answers on "pong" with the last sequence
+                               every 256 samples, and 0 (or 1 once one was missing)
 """
 
 import sys
@@ -27,6 +28,9 @@ for n, sample in enumerate(source, 1):
     if mode == "latency":
         answer[0], answer[1] = seq, time.clock_gettime_ns(time.CLOCK_MONOTONIC)
         pong.publish(answer.view(np.uint8))
-    elif n % 256 == 0:
-        answer[0] = seq
-        pong.publish(answer.view(np.uint8))
+    else:
+        if seq != n:
+            answer[1] = 1  # lost or out of order: the parent fails the run
+        if n % 256 == 0 or answer[1]:
+            answer[0] = seq
+            pong.publish(answer.view(np.uint8))

@@ -126,28 +126,36 @@ class Publisher:
 
 class Loan:
     """A message loaned in the topic's ring in shared memory, written in
-    place, and published at the end of its `with` block (given back,
-    unpublished, if the block raises):
+    place, and published at the end of its `with` block (not published if
+    the block raises):
 
         with pub.loan() as msg:
             msg["x"] = 1.0
             msg["image"]["data"][:n] = pixels   # no copy but this one
 
     `msg[field]` reads and writes a field; `msg.value` is the whole message
-    (a writable 0-d numpy array; raw topics: a uint8 array). An array made
-    from the loan must be gone when it is published: one still alive would
-    write into a sample other processes read, so the loan is given back
-    unpublished and prime.InUse raised. After the block, `msg` refuses use."""
+    (a writable 0-d numpy array; raw topics: a uint8 array). A described
+    type's message starts zeroed. Every array made from the loan must be gone
+    when it is published: one still alive could write into a sample other
+    processes read, so the loan is not published and prime.InUse raised
+    (its place goes back to the ring once the last such array is gone).
+    After its block, `msg` refuses use."""
 
     def __init__(self, loan, dtype, where):
         self._loan, self._where = loan, where
-        self._flat = _np.frombuffer(loan, dtype=dtype or _np.uint8, count=-1 if dtype is None else 1)
-        self._value = self._flat if dtype is None else self._flat.reshape(())
+        # numpy holds one export of the loan's bytes, and with it one
+        # reference to `loan`, until the last array made from them is gone.
+        flat = _np.frombuffer(loan, dtype=_np.uint8)
+        if dtype is not None:
+            flat[:] = 0
+            self._value = flat.view(dtype).reshape(())
+        else:
+            self._value = flat
 
     @property
     def value(self):
         if self._value is None:
-            raise ValueError(f"a loan of {self._where} used after it was published or given back")
+            raise ValueError(f"a loan of {self._where} used after its end")
         return self._value
 
     def __getitem__(self, key):
@@ -158,37 +166,34 @@ class Loan:
 
     def publish(self, stamp=None):
         """Publishes the message (`stamp`: seconds of the steady clock; default now)."""
-        self.value  # noqa: B018  (refuses a loan already ended)
-        self._value = None
-        # Every array over the loan refers to _flat: with none alive but this
-        # object's own, the count is 2 (the attribute and getrefcount's argument).
-        if _sys.getrefcount(self._flat) > 2:
-            self._end()
-            raise _prime.InUse("in use", f"an array made from the loan of {self._where} is still alive: it "
-                                         "would write into a published sample, so the loan was given back, "
-                                         "unpublished")
-        self._flat = None
-        self._loan.publish(stamp)
-
-    def give_back(self):
-        """Ends the loan unpublished."""
-        self._value = None
-        self._end()
+        loan = self._end()
+        if loan is None:
+            raise _prime.InUse("in use", f"an array made from the loan of {self._where} is still alive (del "
+                                         "it before the loan ends): it could write into a published sample, "
+                                         "so the loan was not published")
+        loan.publish(stamp)
 
     def _end(self):
-        self._flat = None
-        self._loan.give_back()
+        """Ends this object's use of the loan: the loan itself if no export of
+        its bytes is left, else None (it goes back to the ring with the last
+        one)."""
+        self.value  # noqa: B018  (refuses a loan already ended)
+        self._value = None
+        loan, self._loan = self._loan, None
+        # Its references now: `loan` here and getrefcount's argument, and one
+        # more while numpy's export of its bytes lives.
+        return loan if _sys.getrefcount(loan) == 2 else None
 
     def __enter__(self):
         return self
 
     def __exit__(self, error, *rest):
-        if error is not None:
-            if self._value is not None:
-                self.give_back()
+        if self._value is None:
             return False
-        if self._value is not None:
-            self.publish()
+        if error is not None:
+            self._end()  # not published: back to the ring with its last array
+            return False
+        self.publish()
         return False
 
 
@@ -239,6 +244,9 @@ class _TypeOf:
     def value_of(self, data):
         if self.dtype is None:
             return data
+        if len(data) != self.dtype.itemsize:
+            raise _prime.Damaged("damaged", f"service '{self.service}' answered {len(data)} bytes for its "
+                                            f"{self.dtype.itemsize}-byte {self.type}")
         return _np.frombuffer(data, dtype=self.dtype, count=1).reshape(())
 
 
@@ -254,7 +262,11 @@ def _message_bytes(value, dtype, where):
             if field not in dtype.names:
                 raise _prime.TypeMismatch("type mismatch", f"{where} has no field '{field}'; it has "
                                                            f"{', '.join(dtype.names)}")
-            message[field] = v
+            try:
+                message[field] = v
+            except (ValueError, TypeError) as e:
+                raise _prime.TypeMismatch("type mismatch", f"{where}: field '{field}' ({dtype[field]}) cannot "
+                                                           f"take {v!r}: {e}") from None
         value = message
     value = _np.asarray(value)
     if value.dtype != dtype or value.size != 1:

@@ -1,0 +1,146 @@
+"""A message type's description (media/common/include/prime/common/schema.hpp)
+read into a numpy dtype. The text comes from a shared-memory segment another
+process wrote, so it is input: every number is bounded by the type's size,
+every field must lie inside it, nesting is bounded, and anything else is
+prime.Damaged naming what was wrong."""
+
+import numpy as _np
+
+import prime as _prime
+
+_SCALARS = {"i8": "i1", "i16": "<i2", "i32": "<i4", "i64": "<i8", "u8": "u1", "u16": "<u2", "u32": "<u4",
+            "u64": "<u8", "f32": "<f4", "f64": "<f8", "bool": "?", "char": "S1"}
+_MAX_DEPTH = 32
+
+
+class _Parser:
+    def __init__(self, text, size):
+        self.text, self.size, self.at, self.depth = text, size, 0, 0
+
+    def fail(self, what):
+        raise _prime.Damaged("damaged", f"type description {self.text[:200]!r}: {what} (at {self.at})")
+
+    def number(self, limit=None):
+        start = self.at
+        while self.at < len(self.text) and self.text[self.at].isdigit():
+            self.at += 1
+        if start == self.at or self.at - start > 12:
+            self.fail("a number expected")
+        n = int(self.text[start:self.at])
+        if n > (self.size if limit is None else limit):
+            self.fail(f"{n} is beyond the type's {self.size} bytes")
+        return n
+
+    def expect(self, char):
+        if self.text[self.at:self.at + 1] != char:
+            self.fail(f"{char!r} expected")
+        self.at += 1
+
+    def type(self):
+        self.depth += 1
+        if self.depth > _MAX_DEPTH:
+            self.fail(f"nested deeper than {_MAX_DEPTH}")
+        t = self.text
+        if t.startswith("str", self.at):
+            self.at += 3
+            dtype = self.string()
+        elif t.startswith("vec", self.at):
+            self.at += 3
+            dtype = self.vector()
+        elif t.startswith("arr", self.at):
+            self.at += 3
+            dtype = self.array()
+        elif t.startswith("{", self.at):
+            dtype = self.struct()
+        elif t.startswith("?", self.at):
+            self.at += 1
+            dtype = _np.dtype(f"V{self.number()}")
+        else:
+            name = next((n for n in sorted(_SCALARS, key=len, reverse=True) if t.startswith(n, self.at)), None)
+            if name is None:
+                self.fail("an unknown type")
+            self.at += len(name)
+            dtype = _np.dtype(_SCALARS[name])
+        self.depth -= 1
+        if dtype.itemsize > self.size:
+            self.fail(f"a type of {dtype.itemsize} bytes in one of {self.size}")
+        return dtype
+
+    def element(self, n):
+        """`N "," stride "(" type ")"` after the count: the element, `stride` long."""
+        stride = self.number()
+        self.expect("(")
+        element = self.type()
+        self.expect(")")
+        if n * stride > self.size or element.itemsize > stride:
+            self.fail(f"{n} elements of {element.itemsize} bytes, {stride} apart")
+        return element if element.itemsize == stride else _padded(element, stride)
+
+    def string(self):  # bounded_string<N>: its size (u32) and its N bytes
+        n = self.number(); self.expect("@"); size_at = self.number(); self.expect(","); data_at = self.number()
+        return self.fields(["size", "data"], ["<u4", f"S{n}" if n else "V0"], [size_at, data_at])
+
+    def vector(self):  # bounded_vector<T, N>: its size (u64) and N places of T
+        n = self.number(); self.expect("@"); size_at = self.number(); self.expect(",")
+        data_at = self.number(); self.expect(",")
+        element = self.element(n)
+        return self.fields(["size", "data"], ["<u8", (element, (n,))], [size_at, data_at])
+
+    def array(self):  # std::array<T, N>
+        n = self.number(); self.expect(",")
+        return _np.dtype((self.element(n), (n,)))
+
+    def struct(self):
+        self.expect("{")
+        names, formats, offsets = [], [], []
+        while True:
+            end = self.text.find("@", self.at)
+            if end < 0:
+                self.fail("a field's '@' expected")
+            names.append(self.text[self.at:end])
+            self.at = end + 1
+            offsets.append(self.number()); self.expect(":")
+            formats.append(self.type())
+            if self.text[self.at:self.at + 1] == "}":
+                self.at += 1
+                break
+            self.expect(",")
+        return self.fields(names, formats, offsets)
+
+    def fields(self, names, formats, offsets, itemsize=None):
+        """A struct dtype; each field inside `itemsize` (default: as long as they reach)."""
+        if len(set(names)) != len(names) or not all(n.isidentifier() for n in names):
+            self.fail(f"field names {names} are not distinct identifiers")
+        formats = [_np.dtype(f) for f in formats]
+        reach = max(o + f.itemsize for o, f in zip(offsets, formats))
+        if reach > (self.size if itemsize is None else itemsize):
+            self.fail(f"fields reach byte {reach} of a type of {itemsize or self.size}")
+        try:
+            return _np.dtype({"names": names, "formats": formats, "offsets": offsets,
+                              "itemsize": reach if itemsize is None else itemsize})
+        except (ValueError, TypeError) as e:
+            self.fail(str(e))
+
+
+def _padded(element, stride):
+    """`element` as a dtype `stride` bytes long."""
+    if element.names is None:
+        return _np.dtype({"names": ["value"], "formats": [element], "offsets": [0], "itemsize": stride})
+    return _np.dtype({"names": list(element.names), "formats": [element.fields[n][0] for n in element.names],
+                      "offsets": [element.fields[n][1] for n in element.names], "itemsize": stride})
+
+
+def dtype_of(schema, size):
+    """The numpy dtype of a type `size` bytes long described by `schema`, or
+    None for an empty description. Raises prime.Damaged for a description
+    that does not fit its size or does not parse."""
+    if not schema:
+        return None
+    parser = _Parser(schema, size)
+    dtype = parser.type()
+    if parser.at != len(schema):
+        parser.fail("text after the type")
+    if dtype.names is None:
+        return parser.fields(["value"], [dtype], [0], size)
+    return parser.fields(list(dtype.names), [dtype.fields[n][0] for n in dtype.names],
+                         [dtype.fields[n][1] for n in dtype.names], size)
