@@ -82,6 +82,14 @@ for library in libprime_shm.so libprime_shm.a libprime_optimus.so libprime_optim
     fail "$library is not installed" ""
 done
 echo "libprime_shm, libprime_optimus and libprime_record installed, shared and static"
+# The Python package, installed where Debian's python3 looks, imports from
+# the prefix (its module finds libprime_shm there through its RUNPATH).
+if [[ -d $work/prefix/lib/python3/dist-packages/prime ]]; then
+  PYTHONPATH=$work/prefix/lib/python3/dist-packages /usr/bin/python3 -c \
+    'import prime, prime.shm; assert issubclass(prime.TypeMismatch, prime.Error)' 2>"$work/python.log" ||
+    fail "the installed prime Python package does not import" "$work/python.log"
+  echo "python: the installed package imports"
+fi
 consumer core -DPRIME_LOADED=shm "$hide_boost" "$hide_hiredis"
 [[ -x $work/core/media_consumer ]] && fail "core: the media were linked though their dependencies are hidden" ""
 consumer media "-DPRIME_COMPONENTS=shm;optimus" "-DPRIME_LOADED=shm;optimus"
