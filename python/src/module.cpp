@@ -279,7 +279,7 @@ PYBIND11_MODULE(_prime, m) {
       .def(
           "subscribe",
           [](shm::Core& core, const std::string& name, std::size_t history, double spin) {
-            const auto micros = std::chrono::microseconds{static_cast<std::int64_t>(spin * 1e6)};
+            const auto micros = std::chrono::duration_cast<std::chrono::microseconds>(duration_of(spin, "a spin"));
             return std::make_unique<Subscriber>(core.raw_subscribe(name, {.history = history, .spin = micros}));
           },
           py::arg("name"), py::arg("history") = 0, py::arg("spin") = 50e-6, py::keep_alive<0, 1>())
