@@ -174,6 +174,14 @@ def test_prime_ls_lists_the_python_participant(domain):
     peer.close()
 
 
+def wait_until_asleep(task):
+    """Waits until the thread /proc/<pid>[/task/<tid>] sleeps in the kernel's futex code (in read())."""
+    deadline = time.monotonic() + 10
+    while "futex" not in open(f"{task}/wchan").read():
+        assert time.monotonic() < deadline, f"{task} never slept in read()"
+        time.sleep(0.001)  # the poll's interval: what it waits for is the condition above
+
+
 def test_ctrl_c_ends_a_blocking_read(domain):
     peer = Peer("publish", domain, 1)
     script = textwrap.dedent(f"""
@@ -189,11 +197,7 @@ def test_ctrl_c_ends_a_blocking_read(domain):
     reader = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
     try:
         assert reader.stdout.readline().strip() == "waiting"
-        # Asleep in read(): its one thread waits in the kernel's futex code.
-        deadline = time.monotonic() + 10
-        while "futex" not in open(f"/proc/{reader.pid}/wchan").read():
-            assert time.monotonic() < deadline, "the reader never slept in read()"
-            time.sleep(0.001)  # the poll's interval: what it waits for is the condition above
+        wait_until_asleep(f"/proc/{reader.pid}")  # its one thread
         reader.send_signal(signal.SIGINT)
         out, _ = reader.communicate(timeout=10)
         assert out.strip() == "interrupted" and reader.returncode == 0
@@ -207,24 +211,22 @@ def test_a_daemon_thread_asleep_in_read_lets_the_interpreter_exit(domain):
     # C++ destructor that was std::terminate (exit 134).
     peer = Peer("publish", domain, 1)
     script = textwrap.dedent(f"""
-        import threading, time, prime
+        import sys, threading, prime
         d = prime.shm.Domain({domain!r})
         poses = d.subscribe("pose", spin=0)
-        entered = threading.Event()
-        def read():
-            entered.set()
-            poses.read()
-        reader = threading.Thread(target=read, daemon=True)
+        reader = threading.Thread(target=poses.read, daemon=True)
         reader.start()
-        entered.wait()
-        deadline = time.monotonic() + 10
-        while "futex" not in open(f"/proc/self/task/{{reader.native_id}}/wchan").read():
-            assert time.monotonic() < deadline, "the reader never slept in read()"
-            time.sleep(0.001)
-        print("exiting", flush=True)
+        print(reader.native_id, flush=True)
+        sys.stdin.readline()  # exits once the test saw the reader asleep in read()
     """)
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=30)
-    assert (done.returncode, done.stdout.strip()) == (0, "exiting"), done.stderr
+    child = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        wait_until_asleep(f"/proc/{child.pid}/task/{child.stdout.readline().strip()}")
+        out, err = child.communicate("exit\n", timeout=30)
+        assert child.returncode == 0, err
+    finally:
+        child.kill()
     peer.close()
 
 
