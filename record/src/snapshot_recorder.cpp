@@ -2,6 +2,7 @@
 #include "prime/record/snapshot_recorder.hpp"
 
 #include "prime/record/prime_metadata.hpp"
+#include "quiet_thread.hpp"
 
 namespace prime::record {
 
@@ -73,13 +74,13 @@ std::pair<std::string, std::size_t> SnapshotRecorder::take() {
   }
   w->recorder->flush();
   auto* writing = w.get();
-  w->closing = std::thread{[writing] {
+  w->closing = quiet_thread([writing] {
     try {
       writing->recorder->close();
     } catch (...) {
       writing->error = std::current_exception();
     }
-  }};
+  });
   writing_.push_back(std::move(w));
   return {name, messages};
 }

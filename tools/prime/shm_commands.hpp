@@ -32,7 +32,7 @@ struct Options {
 // From now on Ctrl-C ends the command's loop (ctrl_c_pressed()) instead of
 // the process, so it finishes its report.
 void finish_on_ctrl_c();
-bool ctrl_c_pressed();
+bool ctrl_c_pressed();  // asked by the command's loop, on the main thread
 // What such a command exits with: `code`, or kInterrupted when Ctrl-C cut
 // it short. One that runs until Ctrl-C (`open_ended`: given no count or
 // duration) is done when it comes.
