@@ -31,7 +31,9 @@ from ._prime import codes as _codes  # noqa: E402
 for _code in _codes:
     globals()[_error_class(_code).__name__] = _error_class(_code)
 
-from .schema import dtype_of  # noqa: E402
+from .schema import Type, dtype_of  # noqa: E402
 from . import shm  # noqa: E402  (it uses the errors above)
+from .sync import Synced, approximate_time, exact_time, latest_of_each, sync, within_tolerance  # noqa: E402
 
-__all__ = ["Error", "dtype_of", "shm"] + [c.__name__ for c in _errors.values()]
+__all__ = ["Error", "Synced", "Type", "approximate_time", "dtype_of", "exact_time", "latest_of_each", "shm", "sync",
+           "within_tolerance"] + [c.__name__ for c in _errors.values()]

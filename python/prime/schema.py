@@ -1,8 +1,9 @@
 """A message type's description (media/common/include/prime/common/schema.hpp)
-read into a numpy dtype. The text comes from a shared-memory segment another
-process wrote, so it is input: every number is bounded by the type's size,
-every field must lie inside it, nesting is bounded, and anything else is
-prime.Damaged naming what was wrong."""
+read into a numpy dtype, and written from one (prime.Type). The text read
+comes from a shared-memory segment another process wrote, so it is input:
+every number is bounded by the type's size, every field must lie inside it,
+nesting is bounded, and anything else is prime.Damaged naming what was
+wrong."""
 
 import numpy as _np
 
@@ -86,9 +87,10 @@ class _Parser:
         element = self.element(n)
         return self.fields(["size", "data"], ["<u8", (element, (n,))], [size_at, data_at])
 
-    def array(self):  # std::array<T, N>
+    def array(self):  # std::array<T, N>; of char: bytes (S<N>)
         n = self.number(); self.expect(",")
-        return _np.dtype((self.element(n), (n,)))
+        element = self.element(n)
+        return _np.dtype(f"S{n}") if element == _np.dtype("S1") and n > 0 else _np.dtype((element, (n,)))
 
     def struct(self):
         self.expect("{")
@@ -144,3 +146,73 @@ def dtype_of(schema, size):
         return parser.fields(["value"], [dtype], [0], size)
     return parser.fields(list(dtype.names), [dtype.fields[n][0] for n in dtype.names],
                          [dtype.fields[n][1] for n in dtype.names], size)
+
+
+_NAMES = {_np.dtype(v).str: k for k, v in _SCALARS.items() if k != "char"}
+
+
+def description_of(dtype):
+    """The description of a message laid out as `dtype` (what PRIME_DESCRIBE
+    gives a C++ type of that layout; a bounded string or vector is described
+    as the struct it is: its size and data fields). Raises
+    prime.InvalidArgument for what a message cannot hold (objects,
+    pointers, unaligned offsets are allowed: a field is where it is)."""
+    dtype = _np.dtype(dtype)
+    if dtype.subdtype is not None:
+        element, shape = dtype.subdtype
+        text = description_of(element)
+        for n in reversed(shape):
+            text = f"arr{n},{element.itemsize}({text})"
+            element = _np.dtype((element, (n,)))
+        return text
+    if dtype.names is not None:
+        fields = sorted(((dtype.fields[n][1], n, dtype.fields[n][0]) for n in dtype.names))
+        return "{" + ",".join(f"{name}@{offset}:{description_of(field)}" for offset, name, field in fields) + "}"
+    if dtype.kind == "S":
+        return "char" if dtype.itemsize == 1 else f"arr{dtype.itemsize},1(char)"
+    if dtype.kind == "V":
+        return f"?{dtype.itemsize}"
+    name = _NAMES.get(dtype.str)
+    if name is None:
+        raise _prime.InvalidArgument("invalid argument", f"a message cannot hold numpy {dtype} (numbers, bools, "
+                                                         "bytes, arrays and structs of them, little-endian)")
+    return name
+
+
+def alignment_of(dtype):
+    """The alignment C++ gives a type laid out as `dtype`: its widest number's."""
+    dtype = _np.dtype(dtype)
+    if dtype.subdtype is not None:
+        return alignment_of(dtype.subdtype[0])
+    if dtype.names is not None:
+        return max((alignment_of(dtype.fields[n][0]) for n in dtype.names), default=1)
+    return 1 if dtype.kind in "SV" else dtype.itemsize
+
+
+class Type:
+    """A message type as a C++ program knows it, so that a Python end and a
+    C++ end of one topic or service agree on it:
+
+        Command = prime.Type("robot::Command", [("value", "<i8"), ("gain", "<f8")])
+
+    `name` is the C++ type's name as the compiler spells it (namespaces
+    included), `dtype` its layout (fields at the C++ offsets; itemsize its
+    sizeof), `layout` its prime::layout_version. Name, size, alignment and
+    layout make its fingerprint, which must equal the C++ type's: otherwise
+    the two ends are refused with prime.TypeMismatch, never misread."""
+
+    def __init__(self, name, dtype, layout=1, alignment=None):
+        from prime._prime import Type as _Raw
+
+        self.name, self.dtype, self.layout = name, _np.dtype(dtype), layout
+        self.alignment = alignment_of(self.dtype) if alignment is None else alignment
+        self.schema = description_of(self.dtype)
+        self._raw = _Raw(name, self.dtype.itemsize, self.alignment, layout, self.schema)
+
+    @property
+    def described(self):
+        """As C++ describes it: "robot::Command (16 bytes, align 8, layout 1)"."""
+        return self._raw.described
+
+    def __repr__(self):
+        return f"prime.Type({self.described})"

@@ -14,13 +14,16 @@ in the topic's max_held) until the Sample is released (the end of its
 `with` block, or release()) and no array or memoryview made from it lives.
 """
 
+import atexit as _atexit
 import re as _re
 import sys as _sys
+import weakref as _weakref
 
 import numpy as _np
 
 import prime as _prime
 from prime._prime import Core as _Core
+from prime._prime import Type as _RawType
 
 
 class Sample:
@@ -79,6 +82,12 @@ class Subscriber:
         comes, or Ctrl-C). Raises prime.Timeout."""
         return Sample(self._reader.read(timeout), self.dtype, self.name)
 
+    def read_batch(self, max=64, timeout=None):
+        """The samples there are, up to `max`, taken at once once one is
+        (waiting up to `timeout` seconds for it: prime.Timeout), each held
+        as read()'s is: at most what the topic's max_held leaves."""
+        return [Sample(held, self.dtype, self.name) for held in self._reader.read_batch(max, timeout)]
+
     def try_read(self):
         """The next sample if one is there, else None."""
         held = self._reader.try_read()
@@ -94,11 +103,11 @@ class Subscriber:
 
 
 class Publisher:
-    """The publisher of an existing topic (its type is the topic's)."""
+    """The publisher of a topic (its type is the topic's)."""
 
-    def __init__(self, core, name):
+    def __init__(self, core, name, publisher=None):
         self.name, self.type, self.dtype = _topic(core, name)
-        self._publisher = core.publisher(name)
+        self._publisher = core.publisher(name) if publisher is None else publisher
 
     def message(self):
         """A zeroed message of the topic's type, to fill and publish."""
@@ -199,7 +208,9 @@ class Loan:
 
 class Domain:
     """A participant of the shared-memory domain `name`, listed by `prime ls`
-    under `participant` (default: the program's name)."""
+    under `participant` (default: the program's name). Services it serves
+    run until close() (or the end of its `with` block, or the program's
+    exit)."""
 
     def __init__(self, name, participant=""):
         self._core = _Core(name, participant)
@@ -210,9 +221,53 @@ class Domain:
         """A subscriber of `topic` (which must exist), whatever its type."""
         return Subscriber(self._core, topic, history, spin)
 
-    def publisher(self, topic):
-        """The publisher of `topic` (which must exist), whatever its type."""
-        return Publisher(self._core, topic)
+    def publisher(self, topic, type=None, capacity=64, block=False, block_timeout=1.0, max_message_size=None,
+                  max_subscribers=8):
+        """The publisher of `topic`. With no `type`, the topic must exist and
+        its type is its own. With a `type` (a prime.Type, or `bytes` for raw
+        bytes up to `max_message_size`), the topic is created with the QoS
+        given (as C++'s TopicQos: `block` is Overflow::block) if no one has
+        opened it yet; else it must carry that type (prime.TypeMismatch)."""
+        if type is None:
+            return Publisher(self._core, topic)
+        made = self._core.publisher(topic, _raw_type(type, "a topic's type"), capacity, block, block_timeout,
+                                    max_message_size or 0, max_subscribers)
+        return Publisher(self._core, topic, made)
+
+    def serve(self, service, fn, request, reply, workers=1, timeout=1.0, max_request_size=None, max_reply_size=None):
+        """Serves `service` by `fn(request) -> reply` on `workers` threads of
+        this process, to callers in any process of the domain, C++ or Python.
+        `request` and `reply` are prime.Type (fn takes a read-only numpy
+        value and returns an array or dict of the reply's fields) or `bytes`
+        (fn takes bytes and returns bytes-like; then give the max sizes).
+        A prime.Error raised by fn reaches the caller with its code; any
+        other exception as prime.BlockFailed, named. `timeout` is how long
+        a caller waits when it names no timeout of its own. Each call holds
+        the GIL while fn runs; requests are copied once out of shared memory
+        and replies once into it. prime.InUse if a live server serves it."""
+        raw_request, raw_reply = _raw_type(request, "a request type"), _raw_type(reply, "a reply type")
+        request_way = _Way(_dtype_of(request), service, "request", _described(request))
+        reply_way = _Way(_dtype_of(reply), service, "reply", _described(reply))
+
+        def handle(data):
+            return reply_way.bytes_of(fn(request_way.value_of(data)))
+
+        self._core.serve(service, raw_request, raw_reply, handle, workers, timeout, max_request_size or 0,
+                         max_reply_size or 0)
+        _serving.add(self)
+
+    def close(self):
+        """Stops serving (waiting for calls in progress). Topics read and
+        published stay usable."""
+        _serving.discard(self)
+        self._core.stop()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
 
     def call(self, service, request, timeout=None):
         """Calls `service` with `request` (a numpy array or dict of its request
@@ -225,18 +280,45 @@ class Domain:
             info = self._core.service(service)
             if info is None:
                 raise _prime.NotFound("not found", f"no service '{service}' in shm domain '{self.name}'")
-            self._clients[key] = (self._core.client(service, timeout), _TypeOf(info, "request", service),
-                                  _TypeOf(info, "reply", service))
+            ways = [_Way(_dtype(info[w + "_raw"], info[w + "_schema"], _size_of(info[w + "_type"])), service, w,
+                         info[w + "_type"]) for w in ("request", "reply")]
+            self._clients[key] = (self._core.client(service, timeout), *ways)
         client, request_type, reply_type = self._clients[key]
         return reply_type.value_of(client.call(request_type.bytes_of(request)))
 
 
-class _TypeOf:
-    """One way of a service: bytes to and from its type."""
+# Domains that serve: stopped at the program's exit, while their workers can
+# still take the GIL to finish a call.
+_serving = _weakref.WeakSet()
 
-    def __init__(self, info, way, service):
-        self.type, self.service, self.way = info[way + "_type"], service, way
-        self.dtype = _dtype(info[way + "_raw"], info[way + "_schema"], _size_of(self.type))
+
+@_atexit.register
+def _stop_serving():
+    for domain in list(_serving):
+        domain.close()
+
+
+def _raw_type(type, what):
+    if type is bytes:
+        return _RawType.raw()
+    if isinstance(type, _prime.Type):
+        return type._raw
+    raise _prime.InvalidArgument("invalid argument", f"{what} is a prime.Type or bytes, not {type!r}")
+
+
+def _dtype_of(type):
+    return None if type is bytes else type.dtype
+
+
+def _described(type):
+    return "raw bytes" if type is bytes else type.described
+
+
+class _Way:
+    """One way of a service: bytes to and from its type (dtype None: raw)."""
+
+    def __init__(self, dtype, service, way, type_name):
+        self.dtype, self.service, self.way, self.type = dtype, service, way, type_name
 
     def bytes_of(self, value):
         return _message_bytes(value, self.dtype, f"service '{self.service}' ({self.type} {self.way})")

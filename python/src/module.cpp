@@ -1,5 +1,5 @@
 // prime._prime: the Shm medium for Python, over its run-time-typed handles
-// (Core::raw_subscribe, raw_publisher, raw_chain). A sample is handed to
+// (Core::raw_subscription, raw_publisher, raw_chain, raw_serve). A sample is handed to
 // Python as an object that holds its View and exports its bytes, read-only,
 // in place in shared memory; numpy wraps them with no copy (prime/shm.py),
 // and the sample stays held while any array made from it lives.
@@ -10,12 +10,14 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
 #include <cstring>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "prime/shm.hpp"
 
@@ -85,37 +87,161 @@ struct Held {
   prime::Sample<shm::View<shm::Bytes>> sample;
 };
 
-// One subscriber; reads are serialised (a Reader is read by one thread at a time).
+// Waits for `read(deadline)` (a std::expected) without the GIL, in slices
+// that look for signals (Ctrl-C) between them, up to `timeout` (None:
+// forever); returns its value or throws its error. A slice's end is not the
+// caller's: nothing yet, or no room to hold another sample yet (one held
+// elsewhere may be released meanwhile).
+template <class F>
+auto wait_for(F&& read, std::optional<double> timeout) {
+  const auto deadline = deadline_after(timeout);
+  while (true) {
+    auto got = without_gil([&] { return std::optional{read(std::min(deadline, Clock::now() + kSignalCheck))}; });
+    if (*got) return std::move(**got);
+    const auto code = (*got).error().code;
+    if ((code != prime::Errc::timeout && code != prime::Errc::held_limit) || Clock::now() >= deadline)
+      throw prime::Failure{(*got).error()};
+    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+  }
+}
+
+// One subscriber of a topic: its source, and its reader (until it is given
+// to a sync, which reads the source with readers of its own). Reads are
+// serialised (a Reader is read by one thread at a time).
 struct Subscriber {
-  prime::Reader<shm::View<shm::Bytes>> reader;
+  shm::Subscription<shm::Bytes> source;
+  std::optional<prime::Reader<shm::View<shm::Bytes>>> reader;
   std::mutex mutex;
 
+  explicit Subscriber(shm::Subscription<shm::Bytes> s) : source{std::move(s)}, reader{source.subscribe()} {}
+
+  prime::Reader<shm::View<shm::Bytes>>& own() {
+    if (!reader)
+      throw prime::Failure{{prime::Errc::invalid_argument, "the subscriber of '" + source.name() + "' was given to a sync"}};
+    return *reader;
+  }
+
   std::shared_ptr<Held> read(std::optional<double> timeout) {
-    const auto deadline = deadline_after(timeout);
-    while (true) {
-      auto got = without_gil([&] {
-        std::scoped_lock lock{mutex};
-        return std::optional{reader.read_until(std::min(deadline, Clock::now() + kSignalCheck))};
-      });
-      if (*got) return std::make_shared<Held>(Held{std::move(**got)});
-      // A slice's end is not the caller's: nothing yet, or no room to hold
-      // another sample yet (one held elsewhere may be released meanwhile).
-      const auto code = got->error().code;
-      if ((code != prime::Errc::timeout && code != prime::Errc::held_limit) || Clock::now() >= deadline)
-        throw prime::Failure{got->error()};
-      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
-    }
+    auto sample = wait_for(
+        [&](Clock::time_point until) {
+          std::scoped_lock lock{mutex};
+          return own().read_until(until);
+        },
+        timeout);
+    return std::make_shared<Held>(Held{std::move(sample)});
+  }
+
+  // Up to `max` samples taken at once (what is there once one is, and at
+  // most what the topic's max_held leaves), waiting up to `timeout` for the
+  // first as read() does.
+  std::vector<std::shared_ptr<Held>> read_batch(std::size_t max, std::optional<double> timeout) {
+    if (max == 0) throw prime::Failure{{prime::Errc::invalid_argument, "a batch holds at least one sample"}};
+    std::vector<prime::Sample<shm::View<shm::Bytes>>> taken;
+    wait_for(
+        [&](Clock::time_point until) {
+          std::scoped_lock lock{mutex};
+          return own().read_some(taken, max, until);
+        },
+        timeout);
+    std::vector<std::shared_ptr<Held>> out;
+    out.reserve(taken.size());
+    for (auto& sample : taken) out.push_back(std::make_shared<Held>(Held{std::move(sample)}));
+    return out;
   }
 
   std::optional<std::shared_ptr<Held>> try_read() {
     auto got = without_gil([&] {
       std::scoped_lock lock{mutex};
-      return reader.try_read();
+      return own().try_read();
     });
     if (!got) return std::nullopt;
     return std::make_shared<Held>(Held{std::move(*got)});
   }
+
+  // Its source, for a sync; its own reader (and slot) let go.
+  shm::Subscription<shm::Bytes> give() {
+    without_gil([&] {
+      std::scoped_lock lock{mutex};
+      own();
+      reader.reset();
+      return true;
+    });
+    return source;
+  }
 };
+
+// A sync of two to four subscribers' sources, as C++'s prime::sync makes it
+// (its workers in the core's runtime): a reader of its sets, each the
+// samples of one set in the order of the sources.
+class SyncReader {
+ public:
+  using Set = std::vector<prime::Sample<shm::View<shm::Bytes>>>;
+
+  SyncReader(const prime::SyncPolicy& policy, std::vector<shm::Subscription<shm::Bytes>> sources) {
+    switch (sources.size()) {
+      case 2: start(policy, sources, std::make_index_sequence<2>{}); break;
+      case 3: start(policy, sources, std::make_index_sequence<3>{}); break;
+      case 4: start(policy, sources, std::make_index_sequence<4>{}); break;
+      default:  // checked before the subscribers are given
+        throw prime::Failure{{prime::Errc::invalid_argument, "a sync of " + std::to_string(sources.size()) + " inputs"}};
+    }
+  }
+
+  std::vector<std::shared_ptr<Held>> read(std::optional<double> timeout) {
+    auto set = wait_for(
+        [&](Clock::time_point until) {
+          std::scoped_lock lock{mutex_};
+          return read_(until);
+        },
+        timeout);
+    std::vector<std::shared_ptr<Held>> out;
+    for (auto& sample : set) out.push_back(std::make_shared<Held>(Held{std::move(sample)}));
+    return out;
+  }
+
+ private:
+  template <std::size_t... I>
+  void start(const prime::SyncPolicy& policy, const std::vector<shm::Subscription<shm::Bytes>>& s, std::index_sequence<I...>) {
+    auto synced = prime::sync(policy, s[I]...);
+    auto reader = std::make_shared<decltype(synced.subscribe())>(synced.subscribe());
+    read_ = [synced, reader](Clock::time_point until) -> std::expected<Set, prime::Error> {
+      auto got = reader->read_until(until);
+      if (!got) return std::unexpected(std::move(got.error()));
+      auto& parts = got->value;
+      Set set;
+      (set.push_back({std::move(std::get<I>(parts)), parts.stamps[I]}), ...);
+      return set;
+    };
+  }
+
+  std::function<std::expected<Set, prime::Error>(Clock::time_point)> read_;
+  std::mutex mutex_;
+};
+
+prime::SyncPolicy policy_of(const std::string& kind, double tolerance, std::size_t depth, std::optional<double> max_span,
+                            const std::vector<double>& min_interval, double age_penalty, int trigger) {
+  auto seconds = [](double s, const char* what) { return duration_of(s, what); };
+  prime::SyncPolicy p{prime::SyncPolicy::Kind::latest_of_each};
+  if (kind == "exact_time") {
+    p = prime::exact_time;
+  } else if (kind == "within_tolerance") {
+    p = prime::within_tolerance(seconds(tolerance, "a tolerance"));
+  } else if (kind == "approximate_time") {
+    p.kind = prime::SyncPolicy::Kind::approximate_time;
+    if (max_span) p.max_span = seconds(*max_span, "a max_span");
+    if (min_interval.size() > prime::kMaxSyncInputs)
+      throw prime::Failure{{prime::Errc::invalid_argument, "min_interval names more inputs than a sync takes"}};
+    for (std::size_t i = 0; i < min_interval.size(); ++i) p.min_interval[i] = seconds(min_interval[i], "a min_interval");
+    if (!(age_penalty >= 0)) throw prime::Failure{{prime::Errc::invalid_argument, "age_penalty must be 0 or more"}};
+    p.age_penalty = age_penalty;
+  } else if (kind == "latest_of_each") {
+    p = prime::latest_of_each_on(trigger);
+  } else {
+    throw prime::Failure{{prime::Errc::invalid_argument, "no sync policy '" + kind + "'"}};
+  }
+  p.depth = depth;
+  return p;
+}
 
 struct Publisher {
   shm::Publisher<shm::Bytes> publisher;
@@ -189,6 +315,75 @@ struct Client {
   }
 };
 
+// A message type from Python: checked as a C++ compiler would have made it.
+shm::Core::RawType type_of(const std::string& name, std::size_t size, std::size_t alignment, std::uint32_t layout,
+                           std::string schema) {
+  auto refuse = [&](const std::string& why) {
+    throw prime::Failure{{prime::Errc::invalid_argument, "type '" + name + "': " + why}};
+  };
+  if (name.empty()) refuse("a type needs its C++ name");
+  if (size == 0) refuse("a message has at least one byte");
+  if (alignment == 0 || (alignment & (alignment - 1)) != 0 || alignment > 4096)
+    refuse("alignment " + std::to_string(alignment) + " is not a power of two up to 4096");
+  if (size % alignment != 0)
+    refuse("its size, " + std::to_string(size) + ", is not a multiple of its alignment, " + std::to_string(alignment));
+  return {prime::Fingerprint::named(name, size, alignment, layout), std::move(schema)};
+}
+
+// What a Python exception raised in a service's function says to its
+// caller: a prime.Error keeps its code; anything else is block_failed,
+// named by its type. Called with the GIL held.
+prime::Failure failure_of(py::error_already_set& e) {
+  const std::string text = py::str(e.value());
+  if (e.matches(py::module_::import("prime").attr("Error"))) {
+    const std::string code = py::str(e.value().attr("code"));
+    for (int value = 0; value < 64; ++value)
+      if (const auto errc = prime::errc_from(value); errc && prime::to_string(*errc) == code)
+        return prime::Failure{{*errc, py::str(e.value().attr("message"))}};
+  }
+  return prime::Failure{{prime::Errc::block_failed, std::string{py::str(e.type().attr("__name__"))} + ": " + text}};
+}
+
+// A Python function a service's workers call: `fn(bytes) -> bytes-like`.
+// Its reference is let go with the GIL, wherever the last worker ends
+// (never after the interpreter is gone: prime.shm stops serving at exit).
+class ServiceFunction {
+ public:
+  explicit ServiceFunction(py::function fn) : fn_{new py::function{std::move(fn)}} {}
+  ServiceFunction(const ServiceFunction&) = delete;
+  ServiceFunction& operator=(const ServiceFunction&) = delete;
+  ~ServiceFunction() {
+    if (!Py_IsInitialized()) return;  // the interpreter is gone: the reference with it
+    py::gil_scoped_acquire gil;
+    delete fn_;
+  }
+
+  // One request's reply, written into `out`; the request is copied into a
+  // bytes object (it is valid only during the call; a Python function may
+  // keep what it is given).
+  std::size_t operator()(const std::byte* request, std::size_t size, std::byte* out, std::size_t capacity) const {
+    py::gil_scoped_acquire gil;
+    try {
+      py::object reply = (*fn_)(py::bytes(reinterpret_cast<const char*>(request), size));
+      const py::buffer buffer = reply;
+      const auto info = buffer.request();
+      if (!PyBuffer_IsContiguous(info.view(), 'C'))
+        throw prime::Failure{{prime::Errc::invalid_argument, "a reply must be one contiguous block of bytes"}};
+      const auto n = static_cast<std::size_t>(info.size * info.itemsize);
+      if (n > capacity)
+        throw prime::Failure{{prime::Errc::too_large, "a reply of " + std::to_string(n) + " bytes exceeds the " +
+                                                          std::to_string(capacity) + " bytes it may take"}};
+      if (n > 0) std::memcpy(out, info.ptr, n);
+      return n;
+    } catch (py::error_already_set& e) {
+      throw failure_of(e);
+    }
+  }
+
+ private:
+  py::function* fn_;  // deleted with the GIL held
+};
+
 py::dict topic_info(const shm::RegistrySnapshot::Topic& t) {
   py::dict d;
   d["name"] = t.name;
@@ -237,13 +432,38 @@ PYBIND11_MODULE(_prime, m) {
 
   py::class_<Subscriber>(m, "Subscriber")
       .def("read", &Subscriber::read, py::arg("timeout") = py::none())
+      .def_property_readonly("name", [](const Subscriber& s) { return s.source.name(); })
       .def("try_read", &Subscriber::try_read)
+      .def("read_batch", &Subscriber::read_batch, py::arg("max"), py::arg("timeout") = py::none())
       .def_property_readonly("lost", [](Subscriber& s) {
         return without_gil([&] {
           std::scoped_lock lock{s.mutex};
-          return s.reader.lost();
+          return s.own().lost();
         });
       });
+
+  py::class_<SyncReader>(m, "Sync").def("read", &SyncReader::read, py::arg("timeout") = py::none());
+  m.def(
+      "sync",
+      [](const std::string& kind, double tolerance, std::size_t depth, std::optional<double> max_span,
+         const std::vector<double>& min_interval, double age_penalty, int trigger, const std::vector<Subscriber*>& inputs) {
+        const auto policy = policy_of(kind, tolerance, depth, max_span, min_interval, age_penalty, trigger);
+        if (std::ranges::any_of(inputs, [](const Subscriber* s) { return s == nullptr; }))
+          throw prime::Failure{{prime::Errc::invalid_argument, "a sync takes subscribers"}};
+        if (inputs.size() < 2 || inputs.size() > 4)
+          throw prime::Failure{{prime::Errc::invalid_argument,
+                                "a sync from Python takes 2 to 4 subscribers, not " + std::to_string(inputs.size())}};
+        for (auto* s : inputs) {
+          if (std::ranges::count(inputs, s) > 1)
+            throw prime::Failure{{prime::Errc::invalid_argument, "the subscriber of '" + s->source.name() + "' is given twice"}};
+          s->own();  // not given to another sync: checked before any is given
+        }
+        std::vector<shm::Subscription<shm::Bytes>> sources;
+        for (auto* s : inputs) sources.push_back(s->give());
+        return std::make_unique<SyncReader>(policy, std::move(sources));
+      },
+      py::arg("kind"), py::arg("tolerance"), py::arg("depth"), py::arg("max_span"), py::arg("min_interval"),
+      py::arg("age_penalty"), py::arg("trigger"), py::arg("inputs"), py::keep_alive<0, 8>());
 
   py::class_<Publisher>(m, "Publisher")
       .def("publish", &Publisher::publish, py::arg("data"), py::arg("stamp") = py::none())
@@ -270,6 +490,13 @@ PYBIND11_MODULE(_prime, m) {
 
   py::class_<Client>(m, "Client").def("call", &Client::call, py::arg("request"));
 
+  py::class_<shm::Core::RawType>(m, "Type")
+      .def(py::init(&type_of), py::arg("name"), py::arg("size"), py::arg("alignment"), py::arg("layout"), py::arg("schema"))
+      .def_static("raw", [] { return shm::Core::RawType{prime::Fingerprint::of<shm::Bytes>(), ""}; })
+      .def_property_readonly("described", [](const shm::Core::RawType& t) { return t.type.describe(); })
+      .def_property_readonly("hash", [](const shm::Core::RawType& t) { return t.type.hash; })
+      .def_readonly("schema", &shm::Core::RawType::schema);
+
   py::class_<shm::Core>(m, "Core")
       .def(py::init([](const std::string& domain, const std::string& participant) {
              return std::make_unique<shm::Core>(domain, shm::DomainOptions{.participant = participant});
@@ -280,12 +507,44 @@ PYBIND11_MODULE(_prime, m) {
           "subscribe",
           [](shm::Core& core, const std::string& name, std::size_t history, double spin) {
             const auto micros = std::chrono::duration_cast<std::chrono::microseconds>(duration_of(spin, "a spin"));
-            return std::make_unique<Subscriber>(core.raw_subscribe(name, {.history = history, .spin = micros}));
+            return std::make_unique<Subscriber>(core.raw_subscription(name, {.history = history, .spin = micros}));
           },
           py::arg("name"), py::arg("history") = 0, py::arg("spin") = 50e-6, py::keep_alive<0, 1>())
       .def(
           "publisher", [](shm::Core& core, const std::string& name) { return std::make_unique<Publisher>(core.raw_publisher(name)); },
           py::arg("name"), py::keep_alive<0, 1>())
+      .def(
+          "publisher",
+          [](shm::Core& core, const std::string& name, const shm::Core::RawType& type, std::size_t capacity, bool block,
+             double block_timeout, std::size_t max_message_size, std::size_t max_subscribers) {
+            const shm::TopicQos qos{.capacity = capacity,
+                                    .max_message_size = max_message_size,
+                                    .overflow = block ? prime::Overflow::block : prime::Overflow::drop_oldest,
+                                    .block_timeout = call_timeout(block_timeout),
+                                    .max_subscribers = max_subscribers};
+            return std::make_unique<Publisher>(core.raw_publisher(name, type.type, type.schema, qos));
+          },
+          py::arg("name"), py::arg("type"), py::arg("capacity"), py::arg("block"), py::arg("block_timeout"),
+          py::arg("max_message_size"), py::arg("max_subscribers"), py::keep_alive<0, 1>())
+      .def(
+          "serve",
+          [](shm::Core& core, const std::string& name, const shm::Core::RawType& request, const shm::Core::RawType& reply,
+             py::function fn, std::size_t workers, double timeout, std::size_t max_request_size, std::size_t max_reply_size) {
+            auto function = std::make_shared<ServiceFunction>(std::move(fn));
+            core.raw_serve(name, request, reply,
+                           [function](const std::byte* in, std::size_t size, std::byte* out, std::size_t capacity) {
+                             return (*function)(in, size, out, capacity);
+                           },
+                           {.workers = workers,
+                            .timeout = call_timeout(timeout),
+                            .max_request_size = max_request_size,
+                            .max_reply_size = max_reply_size});
+          },
+          py::arg("name"), py::arg("request"), py::arg("reply"), py::arg("fn"), py::arg("workers"), py::arg("timeout"),
+          py::arg("max_request_size"), py::arg("max_reply_size"))
+      // Stops what this core runs (its services' workers), waiting for a
+      // call in progress: without the GIL, which that call may need.
+      .def("stop", [](shm::Core& core) { without_gil([&] { return (core.stop(), true); }); })
       .def(
           "client",
           [](shm::Core& core, const std::string& name, std::optional<double> timeout) {

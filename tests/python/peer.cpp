@@ -11,6 +11,16 @@
 //   peer serve D        serves "double" (Command -> Command, value and gain
 //                       doubled) and "fail" (throws "no motors"), says
 //                       "ready", and serves until stdin closes
+//   peer pair D N       makes topics "scan" (Pose) and "odom" (Command),
+//                       says "ready", and on each of N lines publishes the
+//                       next pair: pose i stamped t0 + 10 ms i, command i
+//                       1 ms later; then says "done", and waits for stdin
+//                       to close
+//   peer call D N       calls "triple" (Command -> Command, served from
+//                       Python) N times and checks each answer, then
+//                       "refuse" (its failure's code must be invalid
+//                       argument) and "raise" (block failed, naming the
+//                       Python exception): says "ok N", or what was wrong
 #include <array>
 #include <cstdint>
 #include <iostream>
@@ -91,11 +101,59 @@ int serve(shm::Core& core) {
   return 0;
 }
 
+int pair(shm::Core& core, int n) {
+  auto scans = core.publisher<robot::Pose>("scan", {.capacity = 64});
+  auto odoms = core.publisher<robot::Command>("odom", {.capacity = 64});
+  std::cout << "ready" << std::endl;
+  const auto t0 = prime::Clock::now();
+  std::string line;
+  for (int i = 1; i <= n; ++i) {
+    if (!std::getline(std::cin, line)) return 1;
+    const auto at = t0 + i * 10ms;
+    robot::Pose pose{.x = 0, .y = 0, .id = i, .frame = {}, .v = {}};
+    if (!scans.publish(pose, at) || !odoms.publish(robot::Command{i, 0.0}, at + 1ms)) {
+      std::cout << "publish failed" << std::endl;
+      return 1;
+    }
+  }
+  std::cout << "done" << std::endl;
+  wait_for_stdin_to_close();
+  return 0;
+}
+
+int call(shm::Core& core, int n) {
+  std::cout << "ready" << std::endl;
+  auto triple = core.chain<robot::Command, robot::Command>("triple", {.timeout = 5s});
+  for (int i = 1; i <= n; ++i) {
+    const auto got = triple.call(robot::Command{i, i / 8.0});
+    if (!got || got->value != 3 * i || got->gain != 3 * i / 8.0) {
+      std::cout << "call " << i << ": " << (got ? "value " + std::to_string(got->value) : got.error().describe()) << std::endl;
+      return 1;
+    }
+  }
+  auto refuse = core.chain<robot::Command, robot::Command>("refuse", {.timeout = 5s});
+  const auto refused = refuse.call(robot::Command{1, 1.0});
+  if (refused || refused.error().code != prime::Errc::invalid_argument ||
+      refused.error().message.find("gain out of range") == std::string::npos) {
+    std::cout << "refuse: " << (refused ? "answered" : refused.error().describe()) << std::endl;
+    return 1;
+  }
+  auto raise = core.chain<robot::Command, robot::Command>("raise", {.timeout = 5s});
+  const auto raised = raise.call(robot::Command{1, 1.0});
+  if (raised || raised.error().code != prime::Errc::block_failed ||
+      raised.error().message.find("ZeroDivisionError") == std::string::npos) {
+    std::cout << "raise: " << (raised ? "answered" : raised.error().describe()) << std::endl;
+    return 1;
+  }
+  std::cout << "ok " << n << std::endl;
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) try {
   if (argc < 3) {
-    std::cerr << "usage: peer publish|subscribe|serve DOMAIN [N]\n";
+    std::cerr << "usage: peer publish|subscribe|serve|call|pair DOMAIN [N]\n";
     return 2;
   }
   const std::string role = argv[1];
@@ -104,6 +162,8 @@ int main(int argc, char** argv) try {
   if (role == "publish") return publish(core, n);
   if (role == "subscribe") return subscribe(core, n);
   if (role == "serve") return serve(core);
+  if (role == "call") return call(core, n);
+  if (role == "pair") return pair(core, n);
   std::cerr << "unknown role " << role << "\n";
   return 2;
 } catch (const std::exception& e) {

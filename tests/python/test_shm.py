@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 
 import numpy as np
@@ -18,6 +19,11 @@ import pytest
 import prime
 
 PEER = os.environ["PRIME_PY_PEER"]
+# The peer's types as Python declares them (tests/python/peer.cpp).
+COMMAND = prime.Type("robot::Command", [("value", "<i8"), ("gain", "<f8")])
+POSE = prime.Type("robot::Pose", {"names": ["x", "y", "id", "frame", "v"],
+                                  "formats": ["<f8", "<f8", "<i4", [("size", "<u4"), ("data", "S16")], ("<f4", (3,))],
+                                  "offsets": [0, 8, 16, 20, 40], "itemsize": 56})
 TOOL = os.environ.get("PRIME_TOOL")
 _domains = itertools.count()
 
@@ -241,3 +247,158 @@ def test_schemas_make_dtypes_field_by_field():
                     "{x@0:vec2@0,8,4(i32)}", "{x@99999999999999999999:u8}", "{x@0:str8@0,4}x"):
         with pytest.raises(prime.Damaged):
             prime.dtype_of(hostile, 8)
+
+
+def test_a_cpp_program_calls_services_served_from_python(domain):
+    d = prime.shm.Domain(domain, participant="py-server")
+    threads = []
+
+    def triple(command):
+        threads.append(threading.get_ident())
+        assert not command.flags.writeable
+        return {"value": int(command["value"]) * 3, "gain": float(command["gain"]) * 3}
+
+    def refuse(command):
+        raise prime.InvalidArgument("invalid argument", "gain out of range")
+
+    d.serve("triple", triple, request=COMMAND, reply=COMMAND)
+    d.serve("refuse", refuse, COMMAND, COMMAND)
+    d.serve("raise", lambda command: 1 // 0, COMMAND, COMMAND)
+    peer = Peer("call", domain, 50)  # typed in C++: it binds only if the fingerprints are equal
+    peer.expect("ok 50")
+    assert peer.close() == 0
+    assert len(threads) == 50 and threading.get_ident() not in threads, "run on the service's worker"
+    reply = d.call("triple", {"value": 2, "gain": 0.5}, timeout=5)  # and from Python
+    assert (int(reply["value"]), float(reply["gain"])) == (6, 1.5)
+    with pytest.raises(prime.InvalidArgument, match="gain out of range"):
+        d.call("refuse", {"value": 1, "gain": 1.0}, timeout=5)
+    with pytest.raises(prime.InUse):
+        d.serve("triple", triple, COMMAND, COMMAND)
+    d.close()
+    with pytest.raises(prime.Error):  # no longer served: an error, not a hang
+        d.call("triple", {"value": 1, "gain": 1.0}, timeout=0.5)
+
+
+def test_raw_services_from_python_and_their_limits(domain):
+    with prime.shm.Domain(domain) as d:
+        d.serve("reverse", lambda data: data[::-1], bytes, bytes, max_request_size=64, max_reply_size=64)
+        d.serve("big", lambda data: b"x" * 100, bytes, bytes, max_request_size=8, max_reply_size=16)
+        d.serve("wrong", lambda command: np.zeros(3), COMMAND, COMMAND)
+        d.serve("pairs", lambda command: {"value": 1, "speed": 2}, COMMAND, COMMAND, workers=2)
+        assert d.call("reverse", b"abc", timeout=5) == b"cba"
+        with pytest.raises(prime.TooLarge, match="100 bytes"):
+            d.call("big", b"a", timeout=5)
+        with pytest.raises(prime.TypeMismatch, match="one message"):
+            d.call("wrong", {"value": 1, "gain": 1.0}, timeout=5)
+        with pytest.raises(prime.TypeMismatch, match="no field 'speed'"):
+            d.call("pairs", {"value": 1, "gain": 1.0}, timeout=5)
+        assert d.call("reverse", b"served on", timeout=5) == b"no devres"  # after every failure
+        with pytest.raises(prime.InvalidArgument, match="max_request_size"):
+            d.serve("sizeless", lambda data: data, bytes, bytes)
+        with pytest.raises(prime.InvalidArgument, match="prime.Type or bytes"):
+            d.serve("typeless", lambda data: data, str, bytes)
+
+
+def test_a_topic_made_in_python_is_read_by_cpp_and_python(domain):
+    d = prime.shm.Domain(domain)
+    commands = d.publisher("command", type=COMMAND)  # the peer's QoS: capacity 64
+    peer = Peer("subscribe", domain, 3)  # opens it as robot::Command: the fingerprints are equal
+    mine = d.subscribe("command")
+    assert mine.dtype == COMMAND.dtype  # read back from the description Python wrote
+    for i in range(1, 4):
+        commands.publish({"value": i, "gain": i / 4})
+    peer.expect("ok 3")
+    assert peer.close() == 0
+    assert [int(mine.read(timeout=5).value["value"]) for _ in range(3)] == [1, 2, 3]
+    for other in (prime.Type("robot::Command", COMMAND.dtype, layout=2), prime.Type("robot::Order", COMMAND.dtype)):
+        with pytest.raises(prime.TypeMismatch, match="robot::Command"):
+            d.publisher("command", type=other)
+    with pytest.raises(prime.InUse):
+        d.publisher("command", type=COMMAND)  # its publisher lives
+    raw = d.publisher("bytes", type=bytes, max_message_size=32)
+    raw.publish(b"hello")
+    assert bytes(d.subscribe("bytes", history=1).read(timeout=5).value) == b"hello"
+
+
+def test_a_python_type_of_a_cpp_described_type_is_that_type(domain):
+    peer = Peer("publish", domain, 1)
+    d = prime.shm.Domain(domain)
+    assert POSE.described == "robot::Pose (56 bytes, align 8, layout 1)"
+    with pytest.raises(prime.InUse):  # the type is robot::Pose's: refused only because the peer publishes it
+        d.publisher("pose", type=POSE)
+    poses = d.subscribe("pose")
+    assert poses.dtype["frame"]["data"] == POSE.dtype["frame"]["data"] and poses.dtype.itemsize == 56
+    peer.close()
+
+
+def test_types_are_checked_and_described_as_cpp_describes_them():
+    assert prime.dtype_of(POSE.schema, 56) == prime.dtype_of(POSE.schema, 56)
+    assert POSE.schema == "{x@0:f64,y@8:f64,id@16:i32,frame@20:{size@0:u32,data@4:arr16,1(char)},v@40:arr3,4(f32)}"
+    assert prime.dtype_of(POSE.schema, 56)["frame"]["data"] == np.dtype("S16")
+    assert COMMAND.alignment == 8 and prime.Type("a::B", [("c", "u1"), ("d", "u1")]).alignment == 1
+    for name, dtype, kwargs, why in (("", "<f8", {}, "C\\+\\+ name"),
+                                     ("a::B", [("x", "<f8"), ("c", "u1")], {}, "multiple of its alignment"),
+                                     ("a::B", "<f8", {"alignment": 3}, "power of two"),
+                                     ("a::B", [("o", "O")], {}, "cannot hold"),
+                                     ("a::B", ">f8", {}, "cannot hold")):
+        with pytest.raises(prime.InvalidArgument, match=why):
+            prime.Type(name, dtype, **kwargs)
+
+
+def test_batches_of_views_are_taken_at_once_and_held_each(domain):
+    peer = Peer("publish", domain, 5)
+    d = prime.shm.Domain(domain)
+    poses = d.subscribe("pose")
+    peer.say("go")
+    peer.expect("done")
+    first = poses.read_batch(max=3, timeout=5)
+    assert [int(s.value["id"]) for s in first] == [1, 2, 3]
+    rest = poses.read_batch(max=10, timeout=5)
+    assert [int(s.value["id"]) for s in rest] == [4, 5]
+    assert [s.sequence for s in first + rest] == [0, 1, 2, 3, 4]
+    assert all(any(a <= s.value.ctypes.data < b for a, b in shm_mappings()) for s in first)
+    with pytest.raises(prime.Timeout):
+        poses.read_batch(max=4, timeout=0.05)
+    with pytest.raises(prime.InvalidArgument):
+        poses.read_batch(max=0)
+    peer.close()
+
+
+def test_sync_puts_cpp_samples_together_by_stamp(domain):
+    peer = Peer("pair", domain, 8)
+    d = prime.shm.Domain(domain)
+    scan, odom = d.subscribe("scan"), d.subscribe("odom")
+    exact = prime.sync(prime.exact_time(), d.subscribe("scan"), d.subscribe("odom"))
+    pairs = prime.sync(prime.approximate_time(max_span=0.005), scan, odom)
+    with pytest.raises(prime.InvalidArgument, match="given to a sync"):
+        scan.read(timeout=0)
+    with pytest.raises(prime.InvalidArgument, match="given to a sync"):
+        prime.sync(prime.exact_time(), scan, d.subscribe("odom"))
+    peer.say("next")  # pair 1
+    for i in range(1, 8):
+        peer.say("next")  # pair i + 1: set i is decided once it is there (in step: a slow reader sees the newest sets)
+        with pairs.read(timeout=5) as pair:
+            s, o = pair
+            assert (int(s.value["id"]), int(o.value["value"])) == (i, i)
+            assert pair.stamps[1] - pair.stamps[0] == pytest.approx(0.001, abs=1e-6)
+            assert pair.skew == pytest.approx(0.001, abs=1e-6)
+    peer.expect("done")
+    with pytest.raises(prime.Timeout):
+        exact.read(timeout=0.2)  # no two stamps are equal
+    peer.close()
+
+
+def test_sync_refuses_what_it_cannot_do(domain):
+    peer = Peer("pair", domain, 0)
+    d = prime.shm.Domain(domain)
+    scan = d.subscribe("scan")
+    with pytest.raises(prime.InvalidArgument, match="2 to 4"):
+        prime.sync(prime.exact_time(), scan)
+    with pytest.raises(prime.InvalidArgument, match="given twice"):
+        prime.sync(prime.exact_time(), scan, scan)
+    with pytest.raises(prime.InvalidArgument, match="policy"):
+        prime.sync("exact", scan, d.subscribe("odom"))
+    with pytest.raises(prime.InvalidArgument):
+        prime.sync(prime.within_tolerance(-1.0), scan, d.subscribe("odom"))
+    assert scan.try_read() is None  # after each refusal, still its own
+    peer.close()

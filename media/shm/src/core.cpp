@@ -105,10 +105,10 @@ Reader<View<Bytes>> Core::observe(const std::string& name) {
       detail::existing_topic(registry_, name), SubscribeQos{.spin = std::chrono::microseconds{0}}, runtime(), true)};
 }
 
-Reader<View<Bytes>> Core::raw_subscribe(const std::string& name, SubscribeQos qos) {
+Subscription<Bytes> Core::raw_subscription(const std::string& name, SubscribeQos qos) {
   auto topic = detail::existing_topic(registry_, name);
   qos.history = std::min<std::size_t>(qos.history, topic->header().capacity);
-  return Reader<View<Bytes>>{std::make_unique<SubscriptionReader<Bytes>>(std::move(topic), qos, runtime())};
+  return Subscription<Bytes>{std::move(topic), qos, runtime(), Graph::node(name, "source", "shm")};
 }
 
 Publisher<Bytes> Core::raw_publisher(const std::string& name) {
@@ -133,6 +133,13 @@ ServiceChain<Bytes, Bytes> Core::raw_chain(const std::string& name, ClientQos qo
   if (!service) throw Failure{{Errc::not_found, "no service '" + name + "' in shm domain '" + domain() + "'"}};
   const auto& h = service->header();
   return {bind(name, h.request_type, h.reply_type, qos), Graph::node(name, "service", "shm")};
+}
+
+void Core::raw_serve(const std::string& name, const RawType& request, const RawType& reply, detail::Handler handler,
+                     ServiceQos qos) {
+  const auto raw = Fingerprint::of<Bytes>();
+  host_service(name, {request.type, request.type == raw, request.schema}, {reply.type, reply.type == raw, reply.schema}, qos,
+               std::move(handler));
 }
 
 const std::string& Core::domain() const noexcept { return registry_->domain(); }

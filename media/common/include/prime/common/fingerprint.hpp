@@ -46,13 +46,20 @@ struct Fingerprint {
 
   template <class T>
   static constexpr Fingerprint of() {
+    return named(detail::pretty_name<T>(), sizeof(T), alignof(T), prime::layout_version<T>);
+  }
+
+  // The fingerprint of a type named `full` as the compiler spells it (for
+  // bindings that know a C++ type by its name, size, alignment and layout
+  // version: what of<T>() takes from T).
+  static constexpr Fingerprint named(std::string_view full, std::uint64_t size, std::uint64_t alignment,
+                                     std::uint32_t layout_version) {
     Fingerprint f;
-    const auto full = detail::pretty_name<T>();
     const auto n = full.size() < kNameCapacity - 1 ? full.size() : kNameCapacity - 1;
     for (std::size_t i = 0; i < n; ++i) f.name[i] = full[i];
-    f.size = sizeof(T);
-    f.alignment = alignof(T);
-    f.layout_version = prime::layout_version<T>;
+    f.size = size;
+    f.alignment = alignment;
+    f.layout_version = layout_version;
     auto h = detail::fnv1a(full);
     for (auto v : {f.size, f.alignment, std::uint64_t{f.layout_version}}) {
       for (int i = 0; i < 8; ++i) h = (h ^ ((v >> (8 * i)) & 0xff)) * 0x100000001b3ull;
