@@ -295,7 +295,10 @@ _serving = _weakref.WeakSet()
 @_atexit.register
 def _stop_serving():
     for domain in list(_serving):
-        domain.close()
+        try:
+            domain.close()
+        except _prime.InvalidArgument:
+            pass  # in a forked child: the parent's domain, for the parent to stop
 
 
 def _raw_type(type, what):

@@ -7,6 +7,7 @@
 #include <pybind11/stl.h>
 
 #include <Python.h>
+#include <pthread.h>
 
 #include <algorithm>
 #include <chrono>
@@ -16,6 +17,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -81,6 +83,59 @@ auto without_gil(F&& f) {
   return std::move(*result);
 }
 
+// Handles made before a fork() are the parent's. The child inherits copies
+// of them, whose use would act on the parent's subscriber slots, loans and
+// lease, and whose destruction would free those (or take the parent out of
+// the domain). So in the child they refuse use, and when Python lets them
+// go they are left as they are: their memory is all the child loses. Every
+// handle is made, used and let go with the GIL held, which the thread that
+// forks holds too, so these sets need no lock.
+std::unordered_set<const void*>& live_handles() {
+  static std::unordered_set<const void*> handles;
+  return handles;
+}
+std::unordered_set<const void*>& inherited_handles() {
+  static std::unordered_set<const void*> handles;
+  return handles;
+}
+void on_fork_in_child() {
+  inherited_handles().merge(live_handles());
+  live_handles().clear();
+}
+
+// Throws unless `handle` was made by this process.
+void check_own(const void* handle) {
+  if (inherited_handles().contains(handle))
+    throw prime::Failure{{prime::Errc::invalid_argument,
+                          "this handle was made before the process forked: it is its parent's (make a new "
+                          "prime.shm.Domain in the child)"}};
+}
+
+// A handle's deleter: a handle the parent made is left alone.
+template <class T>
+struct ParentsOnly {
+  void operator()(T* handle) const {
+    if (inherited_handles().contains(handle)) return;
+    live_handles().erase(handle);
+    delete handle;
+  }
+};
+template <class T>
+using Handle = std::unique_ptr<T, ParentsOnly<T>>;
+
+template <class T, class... A>
+Handle<T> make_handle(A&&... args) {
+  Handle<T> handle{new T(std::forward<A>(args)...)};
+  live_handles().insert(handle.get());
+  return handle;
+}
+template <class T>
+std::shared_ptr<T> share_handle(T&& value) {
+  std::shared_ptr<T> handle{new T(std::move(value)), ParentsOnly<T>{}};
+  live_handles().insert(handle.get());
+  return handle;
+}
+
 // A sample taken from a topic: its bytes stay held in the ring (counted in
 // the subscriber's max_held) until this object is gone.
 struct Held {
@@ -116,6 +171,7 @@ struct Subscriber {
   explicit Subscriber(shm::Subscription<shm::Bytes> s) : source{std::move(s)}, reader{source.subscribe()} {}
 
   prime::Reader<shm::View<shm::Bytes>>& own() {
+    check_own(this);
     if (!reader)
       throw prime::Failure{{prime::Errc::invalid_argument, "the subscriber of '" + source.name() + "' was given to a sync"}};
     return *reader;
@@ -128,7 +184,7 @@ struct Subscriber {
           return own().read_until(until);
         },
         timeout);
-    return std::make_shared<Held>(Held{std::move(sample)});
+    return share_handle(Held{std::move(sample)});
   }
 
   // Up to `max` samples taken at once (what is there once one is, and at
@@ -145,7 +201,7 @@ struct Subscriber {
         timeout);
     std::vector<std::shared_ptr<Held>> out;
     out.reserve(taken.size());
-    for (auto& sample : taken) out.push_back(std::make_shared<Held>(Held{std::move(sample)}));
+    for (auto& sample : taken) out.push_back(share_handle(Held{std::move(sample)}));
     return out;
   }
 
@@ -155,7 +211,7 @@ struct Subscriber {
       return own().try_read();
     });
     if (!got) return std::nullopt;
-    return std::make_shared<Held>(Held{std::move(*got)});
+    return share_handle(Held{std::move(*got)});
   }
 
   // Its source, for a sync; its own reader (and slot) let go.
@@ -188,6 +244,7 @@ class SyncReader {
   }
 
   std::vector<std::shared_ptr<Held>> read(std::optional<double> timeout) {
+    check_own(this);
     auto set = wait_for(
         [&](Clock::time_point until) {
           std::scoped_lock lock{mutex_};
@@ -195,7 +252,7 @@ class SyncReader {
         },
         timeout);
     std::vector<std::shared_ptr<Held>> out;
-    for (auto& sample : set) out.push_back(std::make_shared<Held>(Held{std::move(sample)}));
+    for (auto& sample : set) out.push_back(share_handle(Held{std::move(sample)}));
     return out;
   }
 
@@ -248,6 +305,7 @@ struct Publisher {
   std::mutex mutex;
 
   void publish(const py::buffer& data, std::optional<double> stamp) {
+    check_own(this);
     const auto info = data.request();
     if (!PyBuffer_IsContiguous(info.view(), 'C'))
       throw prime::Failure{{prime::Errc::invalid_argument, "a message must be one contiguous block of bytes"}};
@@ -282,6 +340,7 @@ struct LoanedMessage {
   }
 
   void publish(std::optional<double> stamp) {
+    check_own(this);
     if (!loan) throw prime::Failure{{prime::Errc::invalid_argument, "this loan was published already"}};
     const auto when = stamp_of(stamp);
     without_gil([&] {
@@ -297,6 +356,7 @@ struct Client {
   shm::ServiceChain<shm::Bytes, shm::Bytes> chain;
 
   py::bytes call(const py::buffer& request) const {
+    check_own(this);
     const auto info = request.request();
     if (!PyBuffer_IsContiguous(info.view(), 'C'))
       throw prime::Failure{{prime::Errc::invalid_argument, "a request must be one contiguous block of bytes"}};
@@ -399,6 +459,7 @@ py::dict topic_info(const shm::RegistrySnapshot::Topic& t) {
 
 PYBIND11_MODULE(_prime, m) {
   m.doc() = "Prime's Shm medium (see the prime package)";
+  pthread_atfork(nullptr, nullptr, on_fork_in_child);
 
   // A prime::Failure becomes the prime package's exception for its code.
   py::register_exception_translator([](std::exception_ptr p) {
@@ -422,6 +483,7 @@ PYBIND11_MODULE(_prime, m) {
 
   py::class_<Held, std::shared_ptr<Held>>(m, "Held", py::buffer_protocol())
       .def_buffer([](Held& h) {
+        check_own(&h);
         const auto bytes = h.sample.value.bytes();
         return py::buffer_info(const_cast<std::byte*>(bytes.data()), 1, py::format_descriptor<std::uint8_t>::format(), 1,
                                {static_cast<py::ssize_t>(bytes.size())}, {1}, /*readonly=*/true);
@@ -430,7 +492,7 @@ PYBIND11_MODULE(_prime, m) {
       .def_property_readonly("stamp", [](const Held& h) { return seconds_of(h.sample.stamp); })
       .def_property_readonly("size", [](const Held& h) { return h.sample.value.bytes().size(); });
 
-  py::class_<Subscriber>(m, "Subscriber")
+  py::class_<Subscriber, Handle<Subscriber>>(m, "Subscriber")
       .def("read", &Subscriber::read, py::arg("timeout") = py::none())
       .def_property_readonly("name", [](const Subscriber& s) { return s.source.name(); })
       .def("try_read", &Subscriber::try_read)
@@ -442,7 +504,7 @@ PYBIND11_MODULE(_prime, m) {
         });
       });
 
-  py::class_<SyncReader>(m, "Sync").def("read", &SyncReader::read, py::arg("timeout") = py::none());
+  py::class_<SyncReader, Handle<SyncReader>>(m, "Sync").def("read", &SyncReader::read, py::arg("timeout") = py::none());
   m.def(
       "sync",
       [](const std::string& kind, double tolerance, std::size_t depth, std::optional<double> max_span,
@@ -460,27 +522,29 @@ PYBIND11_MODULE(_prime, m) {
         }
         std::vector<shm::Subscription<shm::Bytes>> sources;
         for (auto* s : inputs) sources.push_back(s->give());
-        return std::make_unique<SyncReader>(policy, std::move(sources));
+        return make_handle<SyncReader>(policy, std::move(sources));
       },
       py::arg("kind"), py::arg("tolerance"), py::arg("depth"), py::arg("max_span"), py::arg("min_interval"),
       py::arg("age_penalty"), py::arg("trigger"), py::arg("inputs"), py::keep_alive<0, 8>());
 
-  py::class_<Publisher>(m, "Publisher")
+  py::class_<Publisher, Handle<Publisher>>(m, "Publisher")
       .def("publish", &Publisher::publish, py::arg("data"), py::arg("stamp") = py::none())
       .def(
           "loan",
           [](Publisher& p, std::size_t size) {
+            check_own(&p);
             auto got = without_gil([&] {  // a `block` topic may make it wait for room
               std::scoped_lock lock{p.mutex};
               return std::optional{p.publisher.loan(size)};
             });
             if (!*got) throw prime::Failure{got->error()};
-            return std::make_unique<LoanedMessage>(&p, std::move(**got));
+            return make_handle<LoanedMessage>(&p, std::move(**got));
           },
           py::arg("size"), py::keep_alive<0, 1>());
 
-  py::class_<LoanedMessage>(m, "Loan", py::buffer_protocol())
+  py::class_<LoanedMessage, Handle<LoanedMessage>>(m, "Loan", py::buffer_protocol())
       .def_buffer([](LoanedMessage& l) {
+        check_own(&l);
         if (!l.loan) throw py::buffer_error("this loan was published already");
         const auto bytes = l.loan->bytes();
         return py::buffer_info(bytes.data(), 1, py::format_descriptor<std::uint8_t>::format(), 1,
@@ -488,7 +552,7 @@ PYBIND11_MODULE(_prime, m) {
       })
       .def("publish", &LoanedMessage::publish, py::arg("stamp") = py::none());
 
-  py::class_<Client>(m, "Client").def("call", &Client::call, py::arg("request"));
+  py::class_<Client, Handle<Client>>(m, "Client").def("call", &Client::call, py::arg("request"));
 
   py::class_<shm::Core::RawType>(m, "Type")
       .def(py::init(&type_of), py::arg("name"), py::arg("size"), py::arg("alignment"), py::arg("layout"), py::arg("schema"))
@@ -497,32 +561,39 @@ PYBIND11_MODULE(_prime, m) {
       .def_property_readonly("hash", [](const shm::Core::RawType& t) { return t.type.hash; })
       .def_readonly("schema", &shm::Core::RawType::schema);
 
-  py::class_<shm::Core>(m, "Core")
+  py::class_<shm::Core, Handle<shm::Core>>(m, "Core")
       .def(py::init([](const std::string& domain, const std::string& participant) {
-             return std::make_unique<shm::Core>(domain, shm::DomainOptions{.participant = participant});
+             return make_handle<shm::Core>(domain, shm::DomainOptions{.participant = participant});
            }),
            py::arg("domain"), py::arg("participant") = "")
       .def_property_readonly("domain", &shm::Core::domain)
       .def(
           "subscribe",
           [](shm::Core& core, const std::string& name, std::size_t history, double spin) {
+            check_own(&core);
             const auto micros = std::chrono::duration_cast<std::chrono::microseconds>(duration_of(spin, "a spin"));
-            return std::make_unique<Subscriber>(core.raw_subscription(name, {.history = history, .spin = micros}));
+            return make_handle<Subscriber>(core.raw_subscription(name, {.history = history, .spin = micros}));
           },
           py::arg("name"), py::arg("history") = 0, py::arg("spin") = 50e-6, py::keep_alive<0, 1>())
       .def(
-          "publisher", [](shm::Core& core, const std::string& name) { return std::make_unique<Publisher>(core.raw_publisher(name)); },
+          "publisher",
+          [](shm::Core& core, const std::string& name) {
+            check_own(&core);
+            return make_handle<Publisher>(core.raw_publisher(name));
+          },
           py::arg("name"), py::keep_alive<0, 1>())
       .def(
           "publisher",
           [](shm::Core& core, const std::string& name, const shm::Core::RawType& type, std::size_t capacity, bool block,
              double block_timeout, std::size_t max_message_size, std::size_t max_subscribers) {
+            check_own(&core);
+            check_own(&core);
             const shm::TopicQos qos{.capacity = capacity,
                                     .max_message_size = max_message_size,
                                     .overflow = block ? prime::Overflow::block : prime::Overflow::drop_oldest,
                                     .block_timeout = call_timeout(block_timeout),
                                     .max_subscribers = max_subscribers};
-            return std::make_unique<Publisher>(core.raw_publisher(name, type.type, type.schema, qos));
+            return make_handle<Publisher>(core.raw_publisher(name, type.type, type.schema, qos));
           },
           py::arg("name"), py::arg("type"), py::arg("capacity"), py::arg("block"), py::arg("block_timeout"),
           py::arg("max_message_size"), py::arg("max_subscribers"), py::keep_alive<0, 1>())
@@ -530,6 +601,8 @@ PYBIND11_MODULE(_prime, m) {
           "serve",
           [](shm::Core& core, const std::string& name, const shm::Core::RawType& request, const shm::Core::RawType& reply,
              py::function fn, std::size_t workers, double timeout, std::size_t max_request_size, std::size_t max_reply_size) {
+            check_own(&core);
+            check_own(&core);
             auto function = std::make_shared<ServiceFunction>(std::move(fn));
             core.raw_serve(name, request, reply,
                            [function](const std::byte* in, std::size_t size, std::byte* out, std::size_t capacity) {
@@ -544,19 +617,26 @@ PYBIND11_MODULE(_prime, m) {
           py::arg("max_request_size"), py::arg("max_reply_size"))
       // Stops what this core runs (its services' workers), waiting for a
       // call in progress: without the GIL, which that call may need.
-      .def("stop", [](shm::Core& core) { without_gil([&] { return (core.stop(), true); }); })
+      .def("stop",
+           [](shm::Core& core) {
+             check_own(&core);
+             without_gil([&] { return (core.stop(), true); });
+           })
       .def(
           "client",
           [](shm::Core& core, const std::string& name, std::optional<double> timeout) {
-            return std::make_unique<Client>(Client{core.raw_chain(name, {.timeout = call_timeout(timeout)})});
+            check_own(&core);
+            return make_handle<Client>(Client{core.raw_chain(name, {.timeout = call_timeout(timeout)})});
           },
           py::arg("name"), py::arg("timeout") = py::none(), py::keep_alive<0, 1>())
       .def("topic", [](shm::Core& core, const std::string& name) -> py::object {
+            check_own(&core);
         for (const auto& t : core.registry().topics)
           if (t.name == name) return topic_info(t);
         return py::none();
       })
       .def("service", [](shm::Core& core, const std::string& name) -> py::object {
+            check_own(&core);
         for (const auto& s : core.registry().services)
           if (s.name == name) {
             py::dict d;

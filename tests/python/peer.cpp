@@ -16,6 +16,11 @@
 //                       next pair: pose i stamped t0 + 10 ms i, command i
 //                       1 ms later; then says "done", and waits for stdin
 //                       to close
+//   peer sync D N       syncs "scan" (Pose) and "odom" (Command) by exact
+//                       time (making the topics if Python has not), says
+//                       "ready", and for each of N sets checks pose i and
+//                       command i came together and says "set i"; says
+//                       what was wrong otherwise (exit 1)
 //   peer call D N       calls "triple" (Command -> Command, served from
 //                       Python) N times and checks each answer, then
 //                       "refuse" (its failure's code must be invalid
@@ -25,6 +30,7 @@
 #include <cstdint>
 #include <iostream>
 #include <string>
+#include <string_view>
 
 #include "prime/shm.hpp"
 
@@ -121,6 +127,28 @@ int pair(shm::Core& core, int n) {
   return 0;
 }
 
+int sync_pairs(shm::Core& core, int n) {
+  auto scans = core.subscribe<robot::Pose>("scan", {}, {.capacity = 64});
+  auto odoms = core.subscribe<robot::Command>("odom", {}, {.capacity = 64});
+  auto sets = prime::sync(prime::exact_time, scans, odoms).subscribe();
+  std::cout << "ready" << std::endl;
+  for (int i = 1; i <= n; ++i) {
+    auto got = sets.read_for(10s);
+    if (!got) {
+      std::cout << "set " << i << ": " << got.error().describe() << std::endl;
+      return 1;
+    }
+    const auto& [scan, odom] = got->value;
+    if ((*scan).id != i || (*odom).value != i || got->value.skew() != prime::Clock::duration::zero() ||
+        std::string_view{(*scan).frame} != "py") {
+      std::cout << "set " << i << " came as pose " << (*scan).id << " and command " << (*odom).value << std::endl;
+      return 1;
+    }
+    std::cout << "set " << i << std::endl;
+  }
+  return 0;
+}
+
 int call(shm::Core& core, int n) {
   std::cout << "ready" << std::endl;
   auto triple = core.chain<robot::Command, robot::Command>("triple", {.timeout = 5s});
@@ -153,7 +181,7 @@ int call(shm::Core& core, int n) {
 
 int main(int argc, char** argv) try {
   if (argc < 3) {
-    std::cerr << "usage: peer publish|subscribe|serve|call|pair DOMAIN [N]\n";
+    std::cerr << "usage: peer publish|subscribe|serve|call|pair|sync DOMAIN [N]\n";
     return 2;
   }
   const std::string role = argv[1];
@@ -164,6 +192,7 @@ int main(int argc, char** argv) try {
   if (role == "serve") return serve(core);
   if (role == "call") return call(core, n);
   if (role == "pair") return pair(core, n);
+  if (role == "sync") return sync_pairs(core, n);
   std::cerr << "unknown role " << role << "\n";
   return 2;
 } catch (const std::exception& e) {

@@ -402,3 +402,61 @@ def test_sync_refuses_what_it_cannot_do(domain):
         prime.sync(prime.within_tolerance(-1.0), scan, d.subscribe("odom"))
     assert scan.try_read() is None  # after each refusal, still its own
     peer.close()
+
+
+@pytest.mark.skipif(TOOL is None, reason="the prime tool is not built")
+def test_handles_a_forked_child_inherits_are_its_parents(domain):
+    # A child of fork() (multiprocessing's default) that used or freed them
+    # would act on the parent's subscriber slot and lease.
+    peer = Peer("publish", domain, 1)
+    script = textwrap.dedent(f"""
+        import gc, os, sys, prime
+        d = prime.shm.Domain({domain!r}, participant="forker")
+        poses = d.subscribe("pose")
+        pid = os.fork()
+        if pid == 0:
+            for use in (lambda: poses.try_read(), lambda: d.subscribe("pose"), lambda: d.call("x", b"")):
+                try:
+                    use()
+                    os._exit(3)
+                except prime.InvalidArgument as e:
+                    assert "forked" in str(e), e
+            mine = prime.shm.Domain({domain!r}, participant="child")  # its own: usable
+            assert mine.subscribe("pose").try_read() is None
+            del poses, d, mine
+            gc.collect()
+            sys.exit(0)  # a full exit: the interpreter lets every handle go
+        _, status = os.waitpid(pid, 0)
+        print(os.waitstatus_to_exitcode(status), flush=True)
+        sys.stdin.readline()
+        with poses.read(timeout=5) as s:
+            print(int(s.value["id"]), flush=True)
+        sys.stdin.readline()
+    """)
+    parent = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert parent.stdout.readline().strip() == "0", "the child refused the parent's handles and exited cleanly"
+        listing = subprocess.run([TOOL, "ls", "--domain", domain], capture_output=True, text=True, check=True).stdout
+        assert ["forker", str(parent.pid)] in [row.split()[:2] for row in listing.splitlines()], listing
+        peer.say("go")
+        parent.stdin.write("\n")
+        parent.stdin.flush()
+        assert parent.stdout.readline().strip() == "1", "the parent's subscriber still reads"
+        parent.communicate("\n", timeout=10)
+        assert parent.returncode == 0
+    finally:
+        parent.kill()
+    peer.close()
+
+
+def test_a_cpp_sync_puts_together_what_python_publishes(domain):
+    d = prime.shm.Domain(domain)
+    scans, odoms = d.publisher("scan", type=POSE), d.publisher("odom", type=COMMAND)  # Python's types, C++'s topics
+    peer = Peer("sync", domain, 5)
+    t0 = time.monotonic()  # prime::Clock's seconds
+    for i in range(1, 6):
+        stamp = t0 + i * 0.01
+        scans.publish({"id": i, "frame": (2, b"py")}, stamp=stamp)
+        odoms.publish({"value": i, "gain": 0.0}, stamp=stamp)
+        peer.expect(f"set {i}")  # in step: a sync's reader that falls behind sees the newest sets
+    assert peer.close() == 0
