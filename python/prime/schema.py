@@ -5,6 +5,8 @@ every number is bounded by the type's size, every field must lie inside it,
 nesting is bounded, and anything else is prime.Damaged naming what was
 wrong."""
 
+import re as _re
+
 import numpy as _np
 
 import prime as _prime
@@ -166,6 +168,10 @@ def description_of(dtype):
             element = _np.dtype((element, (n,)))
         return text
     if dtype.names is not None:
+        bad = [n for n in dtype.names if not _re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", n)]
+        if bad or not dtype.names:
+            raise _prime.InvalidArgument("invalid argument", f"a message's fields are named as C++ names them "
+                                                             f"(one at least): not {bad or 'none'}")
         fields = sorted(((dtype.fields[n][1], n, dtype.fields[n][0]) for n in dtype.names))
         return "{" + ",".join(f"{name}@{offset}:{description_of(field)}" for offset, name, field in fields) + "}"
     if dtype.kind == "S":
@@ -177,6 +183,27 @@ def description_of(dtype):
         raise _prime.InvalidArgument("invalid argument", f"a message cannot hold numpy {dtype} (numbers, bools, "
                                                          "bytes, arrays and structs of them, little-endian)")
     return name
+
+
+def same_layout(a, b):
+    """Whether dtypes `a` and `b` lay a message out alike: the same size, and
+    the same description (fields by offset, arrays flat or nested, bytes as
+    S<n> or as chars, a one-field struct or its field)."""
+    a, b = _np.dtype(a), _np.dtype(b)
+    if a == b:
+        return True
+    if a.itemsize != b.itemsize:
+        return False
+    try:
+        return _canonical(a) == _canonical(b)
+    except _prime.Error:
+        return False
+
+
+def _canonical(dtype):
+    text = description_of(dtype)
+    whole = _re.fullmatch(r"\{value@0:(.*)\}", text)  # dtype_of's wrapper of a type that is one value
+    return whole.group(1) if whole else text
 
 
 def alignment_of(dtype):

@@ -105,9 +105,11 @@ class Subscriber:
 class Publisher:
     """The publisher of a topic (its type is the topic's)."""
 
-    def __init__(self, core, name, publisher=None):
+    def __init__(self, core, name, publisher=None, dtype=None):
         self.name, self.type, self.dtype = _topic(core, name)
         self._publisher = core.publisher(name) if publisher is None else publisher
+        if dtype is not None:
+            self.dtype = dtype  # the type's own, as its maker wrote it (the same layout as the description's)
 
     def message(self):
         """A zeroed message of the topic's type, to fill and publish."""
@@ -232,7 +234,7 @@ class Domain:
             return Publisher(self._core, topic)
         made = self._core.publisher(topic, _raw_type(type, "a topic's type"), capacity, block, block_timeout,
                                     max_message_size or 0, max_subscribers)
-        return Publisher(self._core, topic, made)
+        return Publisher(self._core, topic, made, _dtype_of(type))
 
     def serve(self, service, fn, request, reply, workers=1, timeout=1.0, max_request_size=None, max_reply_size=None):
         """Serves `service` by `fn(request) -> reply` on `workers` threads of
@@ -257,8 +259,10 @@ class Domain:
         _serving.add(self)
 
     def close(self):
-        """Stops serving (waiting for calls in progress). Topics read and
-        published stay usable."""
+        """Stops its services and syncs (waiting for calls in progress;
+        prime.InvalidArgument from inside one of its services' functions,
+        which closing would wait for). Its subscribers and publishers stay
+        usable."""
         _serving.discard(self)
         self._core.stop()
 
@@ -354,7 +358,7 @@ def _message_bytes(value, dtype, where):
                                                            f"take {v!r}: {e}") from None
         value = message
     value = _np.asarray(value)
-    if value.dtype != dtype or value.size != 1:
+    if value.size != 1 or not _prime.schema.same_layout(value.dtype, dtype):
         raise _prime.TypeMismatch("type mismatch", f"{where} takes one message of dtype {dtype}, not "
                                                    f"{value.size} of dtype {value.dtype}")
     return _np.ascontiguousarray(value).reshape(-1).view(_np.uint8)

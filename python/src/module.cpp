@@ -120,6 +120,14 @@ struct ParentsOnly {
     delete handle;
   }
 };
+// A core is stopped without the GIL: its services' workers may be waiting
+// for it to finish a call, and each lets its Python function go with it.
+// One let go from inside its own service's function (which could not wait
+// for itself) is left running.
+template <>
+struct ParentsOnly<shm::Core> {
+  void operator()(shm::Core* core) const;
+};
 template <class T>
 using Handle = std::unique_ptr<T, ParentsOnly<T>>;
 
@@ -214,15 +222,13 @@ struct Subscriber {
     return share_handle(Held{std::move(*got)});
   }
 
-  // Its source, for a sync; its own reader (and slot) let go.
-  shm::Subscription<shm::Bytes> give() {
+  // Given to a sync, which reads its source: its own reader (and slot) let go.
+  void give() {
     without_gil([&] {
       std::scoped_lock lock{mutex};
-      own();
       reader.reset();
       return true;
     });
-    return source;
   }
 };
 
@@ -404,6 +410,10 @@ prime::Failure failure_of(py::error_already_set& e) {
   return prime::Failure{{prime::Errc::block_failed, std::string{py::str(e.type().attr("__name__"))} + ": " + text}};
 }
 
+// Whether this thread is running a service's Python function: stopping the
+// core from there would wait for this very thread.
+thread_local bool in_service_function = false;
+
 // A Python function a service's workers call: `fn(bytes) -> bytes-like`.
 // Its reference is let go with the GIL, wherever the last worker ends
 // (never after the interpreter is gone: prime.shm stops serving at exit).
@@ -423,6 +433,10 @@ class ServiceFunction {
   // keep what it is given).
   std::size_t operator()(const std::byte* request, std::size_t size, std::byte* out, std::size_t capacity) const {
     py::gil_scoped_acquire gil;
+    in_service_function = true;
+    struct Done {
+      ~Done() { in_service_function = false; }
+    } done;
     try {
       py::object reply = (*fn_)(py::bytes(reinterpret_cast<const char*>(request), size));
       const py::buffer buffer = reply;
@@ -443,6 +457,27 @@ class ServiceFunction {
  private:
   py::function* fn_;  // deleted with the GIL held
 };
+
+void ParentsOnly<shm::Core>::operator()(shm::Core* core) const {
+  if (inherited_handles().contains(core) || in_service_function) return;
+  live_handles().erase(core);
+  without_gil([&] {
+    core->stop();
+    delete core;
+    return true;
+  });
+}
+
+// Stops `core`'s services and syncs, waiting for a call in progress:
+// without the GIL, which that call may need.
+void stop(shm::Core& core) {
+  check_own(&core);
+  if (in_service_function)
+    throw prime::Failure{{prime::Errc::invalid_argument,
+                          "a domain cannot be closed from inside one of its services' functions: closing waits for "
+                          "every call in progress, this one too"}};
+  without_gil([&] { return (core.stop(), true); });
+}
 
 py::dict topic_info(const shm::RegistrySnapshot::Topic& t) {
   py::dict d;
@@ -521,8 +556,10 @@ PYBIND11_MODULE(_prime, m) {
           s->own();  // not given to another sync: checked before any is given
         }
         std::vector<shm::Subscription<shm::Bytes>> sources;
-        for (auto* s : inputs) sources.push_back(s->give());
-        return make_handle<SyncReader>(policy, std::move(sources));
+        for (auto* s : inputs) sources.push_back(s->source);
+        auto reader = make_handle<SyncReader>(policy, std::move(sources));  // may still refuse: nothing given yet
+        for (auto* s : inputs) s->give();
+        return reader;
       },
       py::arg("kind"), py::arg("tolerance"), py::arg("depth"), py::arg("max_span"), py::arg("min_interval"),
       py::arg("age_penalty"), py::arg("trigger"), py::arg("inputs"), py::keep_alive<0, 8>());
@@ -615,13 +652,7 @@ PYBIND11_MODULE(_prime, m) {
           },
           py::arg("name"), py::arg("request"), py::arg("reply"), py::arg("fn"), py::arg("workers"), py::arg("timeout"),
           py::arg("max_request_size"), py::arg("max_reply_size"))
-      // Stops what this core runs (its services' workers), waiting for a
-      // call in progress: without the GIL, which that call may need.
-      .def("stop",
-           [](shm::Core& core) {
-             check_own(&core);
-             without_gil([&] { return (core.stop(), true); });
-           })
+      .def("stop", &stop)
       .def(
           "client",
           [](shm::Core& core, const std::string& name, std::optional<double> timeout) {

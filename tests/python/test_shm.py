@@ -332,7 +332,8 @@ def test_a_python_type_of_a_cpp_described_type_is_that_type(domain):
 
 
 def test_types_are_checked_and_described_as_cpp_describes_them():
-    assert prime.dtype_of(POSE.schema, 56) == prime.dtype_of(POSE.schema, 56)
+    assert prime.schema.same_layout(prime.dtype_of(POSE.schema, 56), POSE.dtype)
+    assert not prime.schema.same_layout(prime.dtype_of(POSE.schema, 56), COMMAND.dtype)
     assert POSE.schema == "{x@0:f64,y@8:f64,id@16:i32,frame@20:{size@0:u32,data@4:arr16,1(char)},v@40:arr3,4(f32)}"
     assert prime.dtype_of(POSE.schema, 56)["frame"]["data"] == np.dtype("S16")
     assert COMMAND.alignment == 8 and prime.Type("a::B", [("c", "u1"), ("d", "u1")]).alignment == 1
@@ -340,7 +341,9 @@ def test_types_are_checked_and_described_as_cpp_describes_them():
                                      ("a::B", [("x", "<f8"), ("c", "u1")], {}, "multiple of its alignment"),
                                      ("a::B", "<f8", {"alignment": 3}, "power of two"),
                                      ("a::B", [("o", "O")], {}, "cannot hold"),
-                                     ("a::B", ">f8", {}, "cannot hold")):
+                                     ("a::B", ">f8", {}, "cannot hold"),
+                                     ("a::B", [("a b", "<f8")], {}, "named as C"),
+                                     ("a::B", [("x", [])], {}, "one at least")):
         with pytest.raises(prime.InvalidArgument, match=why):
             prime.Type(name, dtype, **kwargs)
 
@@ -460,3 +463,65 @@ def test_a_cpp_sync_puts_together_what_python_publishes(domain):
         odoms.publish({"value": i, "gain": 0.0}, stamp=stamp)
         peer.expect(f"set {i}")  # in step: a sync's reader that falls behind sees the newest sets
     assert peer.close() == 0
+
+
+def test_data_laid_out_as_its_type_says_is_taken_whatever_numpy_calls_it(domain):
+    # A padded nested struct, a 2-D array, fields out of offset order, bytes:
+    # the description flattens them, the layout is the same.
+    inner = np.dtype({"names": ["a"], "formats": ["<i4"], "offsets": [0], "itemsize": 8})
+    layout = np.dtype({"names": ["cov", "tag", "inner", "n"], "formats": [("<f8", (2, 3)), "S3", inner, "<u2"],
+                       "offsets": [0, 56, 48, 60], "itemsize": 64})
+    Odd = prime.Type("test::Odd", layout)
+    d = prime.shm.Domain(domain)
+    odd = d.publisher("odd", type=Odd)
+    reader = d.subscribe("odd")
+    message = np.zeros((), dtype=Odd.dtype)
+    message["cov"] = np.arange(6.0).reshape(2, 3)
+    message["tag"], message["inner"]["a"], message["n"] = b"abc", 7, 9
+    odd.publish(message)
+    with reader.read(timeout=5) as s:
+        v = s.value
+        assert v.dtype.itemsize == 64 and bytes(v.tobytes()) == bytes(message.tobytes())
+        assert list(np.asarray(v["cov"]).ravel()) == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0] and int(v["n"]) == 9
+        odd.publish(v)  # what was read goes back out as it is: the parsed dtype is the same layout
+    assert reader.read(timeout=5).value.tobytes() == message.tobytes()
+    d.serve("same", lambda m: m, Odd, Odd)
+    assert d.call("same", message, timeout=5).tobytes() == message.tobytes()
+    with pytest.raises(prime.TypeMismatch):
+        odd.publish(np.zeros((), dtype=COMMAND.dtype))
+    d.close()
+
+
+def test_a_sync_that_cannot_start_gives_nothing_away(domain):
+    peer = Peer("pair", domain, 0)
+    d = prime.shm.Domain(domain)
+    scan, odom = d.subscribe("scan"), d.subscribe("odom")
+    with pytest.raises(prime.InvalidArgument, match="depth"):
+        prime.sync(prime.exact_time(depth=0), scan, odom)
+    assert scan.try_read() is None and odom.try_read() is None  # still theirs
+    prime.sync(prime.exact_time(), scan, odom)
+    peer.close()
+
+
+def test_a_serving_domain_let_go_or_closed_from_its_own_service(domain):
+    peer = Peer("publish", domain, 1)
+    script = textwrap.dedent(f"""
+        import prime
+        d = prime.shm.Domain({domain!r})
+        Command = prime.Type("robot::Command", [("value", "<i8"), ("gain", "<f8")])
+        def close_me(c):
+            try:
+                d.close()
+            except prime.InvalidArgument as e:
+                return {{"value": 1 if "inside" in str(e) else 2, "gain": 0.0}}
+            return {{"value": 3, "gain": 0.0}}
+        d.serve("close-me", close_me, Command, Command)
+        print(int(d.call("close-me", {{"value": 0, "gain": 0.0}}, timeout=5)["value"]), flush=True)
+        d.serve("busy", lambda c: c, Command, Command)
+        del d  # let go while serving, not closed: stopped without the GIL its workers need
+        print("let go", flush=True)
+    """)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=30)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["1", "let", "go"]
+    peer.close()
