@@ -11,6 +11,12 @@
 //       is copied on the way.
 //   Throughput_ShmToPython/<bytes>  the parent publishes flat out on a `block`
 //       topic; msgs/s is the rate Python reads every sample at, losslessly.
+//   RoundTrip_ShmServiceInPython/<bytes>  the parent calls a raw service
+//       that Python serves (Domain.serve: the request copied into bytes, the
+//       Python function run with the GIL, its reply copied into the reply's
+//       cell), beside prime_ipc's RoundTrip_ShmService (served in C++, in
+//       place both ways). p50_ns ... are half the round trip, as prime_ipc's
+//       RoundTrip rows are (the report doubles both).
 #include <benchmark/benchmark.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -132,6 +138,19 @@ void publish(shm::Publisher<shm::Bytes>& out, std::size_t bytes, std::uint64_t s
   std::move(*loan).publish(stamp);
 }
 
+// The p50, p90 and p99 of `samples` (ns) as the benchmark's counters.
+void percentiles(benchmark::State& state, std::vector<std::uint32_t>& samples) {
+  if (samples.empty()) return;
+  auto at = [&](double q) {
+    const auto k = std::min(samples.size() - 1, static_cast<std::size_t>(q * static_cast<double>(samples.size())));
+    std::nth_element(samples.begin(), samples.begin() + static_cast<std::ptrdiff_t>(k), samples.end());
+    return static_cast<double>(samples[k]);
+  };
+  state.counters["p50_ns"] = at(0.5);
+  state.counters["p90_ns"] = at(0.9);
+  state.counters["p99_ns"] = at(0.99);
+}
+
 void BM_Latency_ShmToPython(benchmark::State& state) try {
   const auto bytes = static_cast<std::size_t>(state.range(0));
   const auto domain = new_domain();
@@ -154,14 +173,7 @@ void BM_Latency_ShmToPython(benchmark::State& state) try {
     if (one_way < 0) throw std::runtime_error{"Python read a sample before it was published: the clocks differ"};
     samples.push_back(static_cast<std::uint32_t>(std::min<std::int64_t>(one_way, UINT32_MAX)));
   }
-  auto at = [&](double q) {
-    const auto k = std::min(samples.size() - 1, static_cast<std::size_t>(q * static_cast<double>(samples.size())));
-    std::nth_element(samples.begin(), samples.begin() + static_cast<std::ptrdiff_t>(k), samples.end());
-    return static_cast<double>(samples[k]);
-  };
-  state.counters["p50_ns"] = at(0.5);
-  state.counters["p90_ns"] = at(0.9);
-  state.counters["p99_ns"] = at(0.99);
+  percentiles(state, samples);
 } catch (const std::exception& e) {
   state.SkipWithError(e.what());
 }
@@ -190,6 +202,43 @@ void BM_Throughput_ShmToPython(benchmark::State& state) try {
   state.SkipWithError(e.what());
 }
 BENCHMARK(BM_Throughput_ShmToPython)->Arg(64)->Arg(1 << 20)->UseRealTime();
+
+void BM_RoundTrip_ShmServiceInPython(benchmark::State& state) try {
+  const auto bytes = static_cast<std::size_t>(state.range(0));
+  const auto domain = new_domain();
+  shm::Core core{domain};
+  PythonReader server{"serve", domain};
+  auto echo = core.chain<shm::Bytes, shm::Bytes>("echo", {.timeout = 10s, .wait_for_service = 10s});
+  std::vector<std::uint32_t> samples;
+  std::uint64_t seq = 0;
+  auto call = [&] {
+    ++seq;
+    std::uint64_t got = 0;
+    std::size_t size = 0;
+    const auto done = echo.call_in_place(
+        [&](std::span<std::byte> request) {
+          std::memcpy(request.data(), &seq, sizeof seq);
+          return bytes;
+        },
+        [&](std::span<const std::byte> reply) {
+          size = reply.size();
+          if (size >= sizeof got) std::memcpy(&got, reply.data(), sizeof got);
+        });
+    if (!done) throw prime::Failure{done.error()};
+    if (got != seq || size != bytes) throw std::runtime_error{"the Python service answered another request"};
+  };
+  for (int i = 0; i < 100; ++i) call();  // warm: the interpreter's first passes, page faults
+  for (auto _ : state) {
+    const auto sent = Clock::now();
+    call();
+    const auto round_trip = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - sent).count();
+    samples.push_back(static_cast<std::uint32_t>(std::min<std::int64_t>(round_trip / 2, UINT32_MAX)));
+  }
+  percentiles(state, samples);
+} catch (const std::exception& e) {
+  state.SkipWithError(e.what());
+}
+BENCHMARK(BM_RoundTrip_ShmServiceInPython)->Arg(64)->Arg(64 << 10)->Arg(1 << 20)->UseRealTime();
 
 }  // namespace
 

@@ -7,9 +7,12 @@ C++ parent publishes on a raw topic, in place, through numpy.
     reader.py stream DOMAIN    every sample on "stream", which must come in order with
                                none lost: answers on "pong" with the last sequence
                                every 256 samples, and 0 (or 1 once one was missing)
+    reader.py serve DOMAIN     serves "echo" (raw bytes, up to 1 MiB) from Python: each
+                               request comes back whole as its reply
 """
 
 import sys
+import threading
 import time
 
 import numpy as np
@@ -18,6 +21,10 @@ import prime
 
 mode, domain = sys.argv[1], sys.argv[2]
 d = prime.shm.Domain(domain, participant="bench-python")
+if mode == "serve":
+    d.serve("echo", lambda request: request, bytes, bytes, max_request_size=1 << 20, max_reply_size=1 << 20)
+    print("ready", flush=True)
+    threading.Event().wait()  # serves until the parent kills it
 source = d.subscribe("ping" if mode == "latency" else "stream")
 pong = d.publisher("pong")
 answer = np.zeros(2, dtype="<u8")
