@@ -73,9 +73,11 @@ def _dtype(raw, schema, size):
 class Subscriber:
     """A real subscriber of a topic (a `block` publisher waits for it)."""
 
-    def __init__(self, core, name, history, spin):
+    def __init__(self, core, name, history, spin, made=None, dtype=None):
+        self._reader = core.subscribe(name, history, spin) if made is None else made
         self.name, self.type, self.dtype = _topic(core, name)
-        self._reader = core.subscribe(name, history, spin)
+        if dtype is not None:
+            self.dtype = dtype  # the type's own, as its maker wrote it (the same layout as the description's)
 
     def read(self, timeout=None):
         """The next sample; waits up to `timeout` seconds (None: until one
@@ -211,17 +213,28 @@ class Loan:
 class Domain:
     """A participant of the shared-memory domain `name`, listed by `prime ls`
     under `participant` (default: the program's name). Services it serves
-    run until close() (or the end of its `with` block, or the program's
-    exit)."""
+    and syncs of its subscribers run until close() (or the end of its
+    `with` block, its being let go, or the program's exit)."""
 
     def __init__(self, name, participant=""):
         self._core = _Core(name, participant)
         self._clients = {}
         self.name = name
 
-    def subscribe(self, topic, history=0, spin=50e-6):
-        """A subscriber of `topic` (which must exist), whatever its type."""
-        return Subscriber(self._core, topic, history, spin)
+    def subscribe(self, topic, history=0, spin=50e-6, type=None, capacity=64, block=False, max_message_size=None,
+                  max_subscribers=8):
+        """A subscriber of `topic`, reading from now (and up to `history`
+        samples already there), spinning `spin` seconds before it sleeps.
+        With no `type`, the topic must exist (prime.NotFound) and its type is
+        its own. With a `type` (a prime.Type, or `bytes`), the topic is made
+        with the QoS given if no one has made it yet (as publisher() makes
+        it); else it must carry that type (prime.TypeMismatch) and have that
+        QoS (prime.QosMismatch)."""
+        if type is None:
+            return Subscriber(self._core, topic, history, spin)
+        made = self._core.subscribe(topic, history, spin, _raw_type(type, "a topic's type"), capacity, block,
+                                    max_message_size or 0, max_subscribers)
+        return Subscriber(self._core, topic, history, spin, made, _dtype_of(type))
 
     def publisher(self, topic, type=None, capacity=64, block=False, block_timeout=1.0, max_message_size=None,
                   max_subscribers=8):

@@ -613,6 +613,20 @@ PYBIND11_MODULE(_prime, m) {
           },
           py::arg("name"), py::arg("history") = 0, py::arg("spin") = 50e-6, py::keep_alive<0, 1>())
       .def(
+          "subscribe",
+          [](shm::Core& core, const std::string& name, std::size_t history, double spin, const shm::Core::RawType& type,
+             std::size_t capacity, bool block, std::size_t max_message_size, std::size_t max_subscribers) {
+            check_own(&core);
+            const auto micros = std::chrono::duration_cast<std::chrono::microseconds>(duration_of(spin, "a spin"));
+            const shm::TopicQos topic{.capacity = capacity,
+                                      .max_message_size = max_message_size,
+                                      .overflow = block ? prime::Overflow::block : prime::Overflow::drop_oldest,
+                                      .max_subscribers = max_subscribers};
+            return make_handle<Subscriber>(core.raw_subscription(name, type, topic, {.history = history, .spin = micros}));
+          },
+          py::arg("name"), py::arg("history"), py::arg("spin"), py::arg("type"), py::arg("capacity"), py::arg("block"),
+          py::arg("max_message_size"), py::arg("max_subscribers"), py::keep_alive<0, 1>())
+      .def(
           "publisher",
           [](shm::Core& core, const std::string& name) {
             check_own(&core);

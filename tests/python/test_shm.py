@@ -525,3 +525,17 @@ def test_a_serving_domain_let_go_or_closed_from_its_own_service(domain):
     assert run.returncode == 0, run.stderr
     assert run.stdout.split() == ["1", "let", "go"]
     peer.close()
+
+
+def test_a_subscriber_makes_its_topic_and_a_cpp_publisher_fills_it(domain):
+    d = prime.shm.Domain(domain)
+    poses = d.subscribe("pose", type=POSE)  # no one has made it: made here, with the peer's QoS
+    with pytest.raises(prime.TypeMismatch):
+        d.subscribe("pose", type=COMMAND)
+    with pytest.raises(prime.QosMismatch):
+        d.subscribe("pose", type=POSE, capacity=8)
+    peer = Peer("publish", domain, 2)  # opens it as robot::Pose, capacity 64
+    peer.say("go")
+    peer.expect("done")
+    assert [int(poses.read(timeout=5).value["id"]) for _ in range(2)] == [1, 2]
+    peer.close()

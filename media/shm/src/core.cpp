@@ -111,6 +111,13 @@ Subscription<Bytes> Core::raw_subscription(const std::string& name, SubscribeQos
   return Subscription<Bytes>{std::move(topic), qos, runtime(), Graph::node(name, "source", "shm")};
 }
 
+Subscription<Bytes> Core::raw_subscription(const std::string& name, const RawType& type, TopicQos topic_qos,
+                                           SubscribeQos qos) {
+  auto opened = open_topic(name, type.type, type.type == Fingerprint::of<Bytes>(), topic_qos, type.schema, "subscriber");
+  qos.history = std::min<std::size_t>(qos.history, opened.capacity);
+  return Subscription<Bytes>{std::move(opened.topic), qos, runtime(), Graph::node(name, "source", "shm")};
+}
+
 Publisher<Bytes> Core::raw_publisher(const std::string& name) {
   return Publisher<Bytes>{detail::existing_topic(registry_, name), std::chrono::milliseconds{1000}, PublishFence::full, {}};
 }

@@ -198,6 +198,13 @@ class Core : public ErasedChainRuntime {
   // hold them briefly. Throws Errc::not_found when there is no such topic.
   [[nodiscard]] Reader<View<Bytes>> observe(const std::string& name);
 
+  // A message type known only at run time: its fingerprint (as a C++
+  // type's, Fingerprint::named) and its description (schema_of<T>()).
+  // Fingerprint::of<Bytes>() is raw bytes.
+  struct RawType {
+    Fingerprint type;
+    std::string schema;
+  };
   // For bindings that know a type only at run time (Python): a source of
   // topic `name` whatever its type, whose readers read each sample's bytes
   // in place. Real subscribers, unlike observe(): each takes one of the
@@ -205,6 +212,11 @@ class Core : public ErasedChainRuntime {
   // source, so sync() takes it. Throws Errc::not_found when there is no
   // such topic, and as subscribe() does.
   [[nodiscard]] Subscription<Bytes> raw_subscription(const std::string& name, SubscribeQos qos = {});
+  // The same, the topic made with `topic_qos` if no one has made it yet.
+  // Throws Errc::type_mismatch when it carries another type, and as
+  // subscribe() does.
+  [[nodiscard]] Subscription<Bytes> raw_subscription(const std::string& name, const RawType& type, TopicQos topic_qos,
+                                                     SubscribeQos qos = {});
 
   // For tools: publishes on topic `name` whatever its type, as raw bytes
   // (the type's size, laid out as its description says). The topic must
@@ -221,13 +233,6 @@ class Core : public ErasedChainRuntime {
   // For tools: a raw-byte handle on service `name`, whatever its types.
   [[nodiscard]] ServiceChain<Bytes, Bytes> raw_chain(const std::string& name, ClientQos qos = {});
 
-  // A message type known only at run time: its fingerprint (as a C++
-  // type's, Fingerprint::named) and its description (schema_of<T>()).
-  // Fingerprint::of<Bytes>() is raw bytes.
-  struct RawType {
-    Fingerprint type;
-    std::string schema;
-  };
   // For bindings that know types only at run time (Python): serves `name`,
   // taking `request` and giving `reply`, by `handler`, which reads the
   // request's bytes where the caller wrote them, writes its reply into
