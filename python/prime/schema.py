@@ -158,7 +158,8 @@ def description_of(dtype):
     gives a C++ type of that layout; a bounded string or vector is described
     as the struct it is: its size and data fields). Raises
     prime.InvalidArgument for what a message cannot hold (objects,
-    pointers, unaligned offsets are allowed: a field is where it is)."""
+    big-endian numbers) and for field names C++ cannot have; offsets are
+    taken as they are, aligned or not."""
     dtype = _np.dtype(dtype)
     if dtype.subdtype is not None:
         element, shape = dtype.subdtype

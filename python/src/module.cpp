@@ -410,16 +410,16 @@ prime::Failure failure_of(py::error_already_set& e) {
   return prime::Failure{{prime::Errc::block_failed, std::string{py::str(e.type().attr("__name__"))} + ": " + text}};
 }
 
-// Whether this thread is running a service's Python function: stopping the
-// core from there would wait for this very thread.
-thread_local bool in_service_function = false;
+// The core whose service's Python function this thread is running, if
+// any: stopping that core from here would wait for this very thread.
+thread_local const shm::Core* serving_core = nullptr;
 
 // A Python function a service's workers call: `fn(bytes) -> bytes-like`.
 // Its reference is let go with the GIL, wherever the last worker ends
 // (never after the interpreter is gone: prime.shm stops serving at exit).
 class ServiceFunction {
  public:
-  explicit ServiceFunction(py::function fn) : fn_{new py::function{std::move(fn)}} {}
+  ServiceFunction(const shm::Core& core, py::function fn) : core_{&core}, fn_{new py::function{std::move(fn)}} {}
   ServiceFunction(const ServiceFunction&) = delete;
   ServiceFunction& operator=(const ServiceFunction&) = delete;
   ~ServiceFunction() {
@@ -433,9 +433,9 @@ class ServiceFunction {
   // keep what it is given).
   std::size_t operator()(const std::byte* request, std::size_t size, std::byte* out, std::size_t capacity) const {
     py::gil_scoped_acquire gil;
-    in_service_function = true;
+    serving_core = core_;
     struct Done {
-      ~Done() { in_service_function = false; }
+      ~Done() { serving_core = nullptr; }
     } done;
     try {
       py::object reply = (*fn_)(py::bytes(reinterpret_cast<const char*>(request), size));
@@ -455,11 +455,12 @@ class ServiceFunction {
   }
 
  private:
-  py::function* fn_;  // deleted with the GIL held
+  const shm::Core* core_;  // which runs it
+  py::function* fn_;       // deleted with the GIL held
 };
 
 void ParentsOnly<shm::Core>::operator()(shm::Core* core) const {
-  if (inherited_handles().contains(core) || in_service_function) return;
+  if (inherited_handles().contains(core) || serving_core == core) return;
   live_handles().erase(core);
   without_gil([&] {
     core->stop();
@@ -472,7 +473,7 @@ void ParentsOnly<shm::Core>::operator()(shm::Core* core) const {
 // without the GIL, which that call may need.
 void stop(shm::Core& core) {
   check_own(&core);
-  if (in_service_function)
+  if (serving_core == &core)
     throw prime::Failure{{prime::Errc::invalid_argument,
                           "a domain cannot be closed from inside one of its services' functions: closing waits for "
                           "every call in progress, this one too"}};
@@ -654,7 +655,7 @@ PYBIND11_MODULE(_prime, m) {
              py::function fn, std::size_t workers, double timeout, std::size_t max_request_size, std::size_t max_reply_size) {
             check_own(&core);
             check_own(&core);
-            auto function = std::make_shared<ServiceFunction>(std::move(fn));
+            auto function = std::make_shared<ServiceFunction>(core, std::move(fn));
             core.raw_serve(name, request, reply,
                            [function](const std::byte* in, std::size_t size, std::byte* out, std::size_t capacity) {
                              return (*function)(in, size, out, capacity);

@@ -510,6 +510,9 @@ def test_a_serving_domain_let_go_or_closed_from_its_own_service(domain):
         d = prime.shm.Domain({domain!r})
         Command = prime.Type("robot::Command", [("value", "<i8"), ("gain", "<f8")])
         def close_me(c):
+            other = prime.shm.Domain({domain!r})
+            other.close()  # another domain closes from here as anywhere
+            del other
             try:
                 d.close()
             except prime.InvalidArgument as e:
