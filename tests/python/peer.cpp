@@ -149,6 +149,15 @@ int sync_pairs(shm::Core& core, int n) {
   return 0;
 }
 
+// Whether a call to `service` fails with `code` and a message naming
+// `text`; says what came otherwise.
+bool fails_with(shm::Core& core, const std::string& service, prime::Errc code, const std::string& text) {
+  const auto got = core.chain<robot::Command, robot::Command>(service, {.timeout = 5s}).call(robot::Command{1, 1.0});
+  if (!got && got.error().code == code && got.error().message.find(text) != std::string::npos) return true;
+  std::cout << service << ": " << (got ? "answered" : got.error().describe()) << std::endl;
+  return false;
+}
+
 int call(shm::Core& core, int n) {
   std::cout << "ready" << std::endl;
   auto triple = core.chain<robot::Command, robot::Command>("triple", {.timeout = 5s});
@@ -159,20 +168,9 @@ int call(shm::Core& core, int n) {
       return 1;
     }
   }
-  auto refuse = core.chain<robot::Command, robot::Command>("refuse", {.timeout = 5s});
-  const auto refused = refuse.call(robot::Command{1, 1.0});
-  if (refused || refused.error().code != prime::Errc::invalid_argument ||
-      refused.error().message.find("gain out of range") == std::string::npos) {
-    std::cout << "refuse: " << (refused ? "answered" : refused.error().describe()) << std::endl;
+  if (!fails_with(core, "refuse", prime::Errc::invalid_argument, "gain out of range") ||
+      !fails_with(core, "raise", prime::Errc::block_failed, "ZeroDivisionError"))
     return 1;
-  }
-  auto raise = core.chain<robot::Command, robot::Command>("raise", {.timeout = 5s});
-  const auto raised = raise.call(robot::Command{1, 1.0});
-  if (raised || raised.error().code != prime::Errc::block_failed ||
-      raised.error().message.find("ZeroDivisionError") == std::string::npos) {
-    std::cout << "raise: " << (raised ? "answered" : raised.error().describe()) << std::endl;
-    return 1;
-  }
   std::cout << "ok " << n << std::endl;
   return 0;
 }
