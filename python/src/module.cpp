@@ -306,9 +306,25 @@ prime::SyncPolicy policy_of(const std::string& kind, double tolerance, std::size
   return p;
 }
 
-struct Publisher {
-  shm::Publisher<shm::Bytes> publisher;
-  std::mutex mutex;
+// A publisher and its lock: one thread at a time loans and publishes. A
+// `block` topic's publish or loan holds the lock while it waits for room,
+// up to block_timeout, without the GIL.
+class Publisher {
+ public:
+  explicit Publisher(shm::Publisher<shm::Bytes> p) : publisher_{std::move(p)} {}
+
+  // Runs `f(publisher)` without the GIL, with the lock; loans dropped
+  // meanwhile go back to the ring before the lock does.
+  template <class F>
+  auto use(F&& f) {
+    return without_gil([&] {
+      std::scoped_lock lock{mutex_};
+      hand_back_dropped();
+      auto result = f(publisher_);
+      hand_back_dropped();
+      return result;
+    });
+  }
 
   void publish(const py::buffer& data, std::optional<double> stamp) {
     check_own(this);
@@ -317,12 +333,34 @@ struct Publisher {
       throw prime::Failure{{prime::Errc::invalid_argument, "a message must be one contiguous block of bytes"}};
     const auto when = stamp_of(stamp);
     const std::span bytes{static_cast<const std::byte*>(info.ptr), static_cast<std::size_t>(info.size * info.itemsize)};
-    const auto sent = without_gil([&] {  // a `block` topic may make it wait for room
-      std::scoped_lock lock{mutex};
-      return publisher.publish(bytes, when);
-    });
+    const auto sent = use([&](auto& publisher) { return publisher.publish(bytes, when); });
     if (!sent) throw prime::Failure{sent.error()};
   }
+
+  // A loan Python let go of unpublished, with the GIL held. It must not
+  // wait for the lock: a `block` publish on another thread may hold it for
+  // up to block_timeout, and every Python thread would wait with this one.
+  // It goes back now if the lock is free, else when its holder lets go of
+  // it (or, if that holder has just looked, at the next use or the end).
+  void drop(shm::Loan<shm::Bytes> loan) {
+    {
+      std::scoped_lock lock{dropped_mutex_};
+      dropped_.push_back(std::move(loan));
+    }
+    if (std::unique_lock lock{mutex_, std::try_to_lock}; lock) hand_back_dropped();
+  }
+
+ private:
+  void hand_back_dropped() {  // with mutex_ held
+    std::vector<shm::Loan<shm::Bytes>> loans;
+    std::scoped_lock lock{dropped_mutex_};
+    loans.swap(dropped_);
+  }  // `loans` ends after the lock: each hands its chunk back
+
+  shm::Publisher<shm::Bytes> publisher_;
+  std::mutex mutex_;
+  std::mutex dropped_mutex_;  // held only to move loans in or out, never while waiting
+  std::vector<shm::Loan<shm::Bytes>> dropped_;  // ends before publisher_: handed back first
 };
 
 // A message loaned in the topic's ring, written in place through its
@@ -336,21 +374,15 @@ struct LoanedMessage {
   LoanedMessage(Publisher* p, shm::Loan<shm::Bytes> l) : publisher{p}, loan{std::move(l)} {}
   LoanedMessage(const LoanedMessage&) = delete;
   LoanedMessage& operator=(const LoanedMessage&) = delete;
-  // With the GIL held: whoever holds the publisher's lock never waits for
-  // the GIL (every other taker releases it first), so this waits at most
-  // for that one's publish or loan.
   ~LoanedMessage() {
-    if (!loan) return;
-    std::scoped_lock lock{publisher->mutex};
-    loan.reset();
+    if (loan) publisher->drop(std::move(*loan));
   }
 
   void publish(std::optional<double> stamp) {
     check_own(this);
     if (!loan) throw prime::Failure{{prime::Errc::invalid_argument, "this loan was published already"}};
     const auto when = stamp_of(stamp);
-    without_gil([&] {
-      std::scoped_lock lock{publisher->mutex};
+    publisher->use([&](auto&) {
       std::move(*loan).publish(when);
       loan.reset();
       return true;
@@ -571,9 +603,8 @@ PYBIND11_MODULE(_prime, m) {
           "loan",
           [](Publisher& p, std::size_t size) {
             check_own(&p);
-            auto got = without_gil([&] {  // a `block` topic may make it wait for room
-              std::scoped_lock lock{p.mutex};
-              return std::optional{p.publisher.loan(size)};
+            auto got = p.use([&](auto& publisher) {  // a `block` topic may make it wait for room
+              return std::optional{publisher.loan(size)};
             });
             if (!*got) throw prime::Failure{got->error()};
             return make_handle<LoanedMessage>(&p, std::move(**got));

@@ -135,6 +135,53 @@ def test_python_publishes_to_a_cpp_subscriber(domain):
     assert peer.close() == 0
 
 
+def thread_state(native_id):
+    """A thread's state as the kernel reports it ('R' running, 'S' asleep...)."""
+    with open(f"/proc/self/task/{native_id}/stat") as stat:
+        return stat.read().rsplit(")", 1)[1].split()[0]
+
+
+def test_a_loan_let_go_does_not_wait_for_a_publish_waiting_for_room(domain):
+    """A `block` publish waiting for room holds its publisher. A loan of that
+    publisher let go meanwhile, on another thread, goes back without waiting
+    for it (the wait ends with the reads, not with block_timeout), and the
+    GIL stays free for the thread that reads."""
+    d = prime.shm.Domain(domain)
+    commands = d.subscribe("command", type=COMMAND, capacity=4, block=True)
+    publisher = d.publisher("command", type=COMMAND, capacity=4, block=True, block_timeout=30.0)
+    loaned = publisher.loan()  # one of the ring's four places
+    for i in range(1, 4):
+        publisher.publish({"value": i, "gain": 0.0})
+    started, outcome = threading.Event(), []
+
+    def publish_fourth():
+        started.set()  # the GIL is let go next inside publish, which waits for room
+        try:
+            publisher.publish({"value": 4, "gain": 0.0})
+            outcome.append("published")
+        except prime.Error as error:
+            outcome.append(error)
+
+    waiter = threading.Thread(target=publish_fourth)
+    waiter.start()
+    started.wait()
+    deadline = time.monotonic() + 10
+    while thread_state(waiter.native_id) != "S":  # asleep on the topic's futex, the publisher's lock held
+        assert time.monotonic() < deadline, "the fourth publish never waited for room"
+        time.sleep(0.001)
+    del loaned  # waited, with the GIL, for the publish's block_timeout before the fix
+    late = d.subscribe("command", history=4)  # what is published so far
+    assert [int(sample.value["value"]) for sample in iter(late.try_read, None)] == [1, 2, 3], \
+        "the loan went back only once the publish had stopped waiting for room"
+    # Room is made by reading: the waiting publish goes on and nothing is lost.
+    assert [int(commands.read(timeout=5).value["value"]) for _ in range(4)] == [1, 2, 3, 4]
+    waiter.join(10)
+    assert outcome == ["published"] and commands.lost == 0
+    with publisher.loan() as again:  # the place the dropped loan took is back
+        again["value"] = 5
+    assert int(commands.read(timeout=5).value["value"]) == 5
+
+
 def test_a_wrong_type_is_refused_by_name(domain):
     peer = Peer("subscribe", domain, 1)
     d = prime.shm.Domain(domain)
