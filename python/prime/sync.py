@@ -100,5 +100,5 @@ class Sync:
 
 
 def sync(policy, *subscribers):
-    """A sync of 2 to 4 subscribers (prime.shm.Domain.subscribe) by `policy`."""
+    """A sync of 2 to 8 subscribers (prime.shm.Domain.subscribe) by `policy`."""
     return Sync(policy, subscribers)

@@ -232,7 +232,7 @@ struct Subscriber {
   }
 };
 
-// A sync of two to four subscribers' sources, as C++'s prime::sync makes it
+// A sync of two to eight subscribers' sources (prime::kMaxSyncInputs), as C++'s prime::sync makes it
 // (its workers in the core's runtime): a reader of its sets, each the
 // samples of one set in the order of the sources.
 class SyncReader {
@@ -244,6 +244,10 @@ class SyncReader {
       case 2: start(policy, sources, std::make_index_sequence<2>{}); break;
       case 3: start(policy, sources, std::make_index_sequence<3>{}); break;
       case 4: start(policy, sources, std::make_index_sequence<4>{}); break;
+      case 5: start(policy, sources, std::make_index_sequence<5>{}); break;
+      case 6: start(policy, sources, std::make_index_sequence<6>{}); break;
+      case 7: start(policy, sources, std::make_index_sequence<7>{}); break;
+      case 8: start(policy, sources, std::make_index_sequence<8>{}); break;
       default:  // checked before the subscribers are given
         throw prime::Failure{{prime::Errc::invalid_argument, "a sync of " + std::to_string(sources.size()) + " inputs"}};
     }
@@ -580,9 +584,9 @@ PYBIND11_MODULE(_prime, m) {
         const auto policy = policy_of(kind, tolerance, depth, max_span, min_interval, age_penalty, trigger);
         if (std::ranges::any_of(inputs, [](const Subscriber* s) { return s == nullptr; }))
           throw prime::Failure{{prime::Errc::invalid_argument, "a sync takes subscribers"}};
-        if (inputs.size() < 2 || inputs.size() > 4)
-          throw prime::Failure{{prime::Errc::invalid_argument,
-                                "a sync from Python takes 2 to 4 subscribers, not " + std::to_string(inputs.size())}};
+        if (inputs.size() < 2 || inputs.size() > prime::kMaxSyncInputs)
+          throw prime::Failure{{prime::Errc::invalid_argument, "a sync takes 2 to " + std::to_string(prime::kMaxSyncInputs) +
+                                                                   " subscribers, not " + std::to_string(inputs.size())}};
         for (auto* s : inputs) {
           if (std::ranges::count(inputs, s) > 1)
             throw prime::Failure{{prime::Errc::invalid_argument, "the subscriber of '" + s->source.name() + "' is given twice"}};

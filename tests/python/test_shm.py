@@ -438,11 +438,28 @@ def test_sync_puts_cpp_samples_together_by_stamp(domain):
     peer.close()
 
 
+def test_a_sync_puts_eight_topics_together_as_cpp_can(domain):
+    d = prime.shm.Domain(domain)
+    cameras = [d.publisher(f"camera{i}", type=COMMAND) for i in range(9)]
+    frames = [d.subscribe(f"camera{i}") for i in range(9)]
+    with pytest.raises(prime.InvalidArgument, match="2 to 8 subscribers, not 9"):
+        prime.sync(prime.exact_time(), *frames)
+    sets = prime.sync(prime.exact_time(), *frames[:8])
+    for stamp in (5.0, 6.0):  # in step: a reader slower than the sets sees the newest
+        for i, camera in enumerate(cameras[:8]):
+            camera.publish({"value": i, "gain": stamp}, stamp=stamp)
+        with sets.read(timeout=5) as one:
+            assert [int(s.value["value"]) for s in one] == list(range(8))
+            assert one.stamps == pytest.approx([stamp] * 8) and one.skew == 0
+    cameras[8].publish({"value": 8, "gain": 0.0})
+    assert int(frames[8].read(timeout=5).value["value"]) == 8  # refused with the others: still its own
+
+
 def test_sync_refuses_what_it_cannot_do(domain):
     peer = Peer("pair", domain, 0)
     d = prime.shm.Domain(domain)
     scan = d.subscribe("scan")
-    with pytest.raises(prime.InvalidArgument, match="2 to 4"):
+    with pytest.raises(prime.InvalidArgument, match="2 to 8"):
         prime.sync(prime.exact_time(), scan)
     with pytest.raises(prime.InvalidArgument, match="given twice"):
         prime.sync(prime.exact_time(), scan, scan)
