@@ -9,7 +9,7 @@
 #include <iterator>
 
 #include "prime/record/prime_metadata.hpp"
-#include "quiet_thread.hpp"
+#include "prime/topology/detail/quiet_threads.hpp"
 
 namespace prime::record {
 
@@ -23,7 +23,7 @@ std::string numbered_path(const std::string& path, std::size_t n) {
 
 Recorder::Recorder(std::string path, RecorderOptions options) : path_{std::move(path)}, options_{std::move(options)} {
   begin_file();  // here, so that a file that cannot be made is this constructor's error
-  writer_ = quiet_thread([this] { run(); });
+  writer_ = prime::detail::with_signals_blocked([this] { return std::thread{[this] { run(); }}; });
 }
 
 Recorder::~Recorder() {

@@ -2,7 +2,7 @@
 #include "prime/record/snapshot_recorder.hpp"
 
 #include "prime/record/prime_metadata.hpp"
-#include "quiet_thread.hpp"
+#include "prime/topology/detail/quiet_threads.hpp"
 
 namespace prime::record {
 
@@ -74,12 +74,14 @@ std::pair<std::string, std::size_t> SnapshotRecorder::take() {
   }
   w->recorder->flush();
   auto* writing = w.get();
-  w->closing = quiet_thread([writing] {
-    try {
-      writing->recorder->close();
-    } catch (...) {
-      writing->error = std::current_exception();
-    }
+  w->closing = prime::detail::with_signals_blocked([writing] {
+    return std::thread{[writing] {
+      try {
+        writing->recorder->close();
+      } catch (...) {
+        writing->error = std::current_exception();
+      }
+    }};
   });
   writing_.push_back(std::move(w));
   return {name, messages};

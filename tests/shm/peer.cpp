@@ -28,13 +28,19 @@
 //   shm_peer call_many <domain> <service> <threads> <calls>      echo: each thread's calls checked, print "ok <n>"
 //   shm_peer call_once <domain> <service> <value>                print "calling", call, print the answer
 //   shm_peer emitter  <domain>                                   serve "emit": publish an Emit on lidar, odom or odom_x
+//   shm_peer signalfd <domain> <service>                         serve with 2 workers, then block SIGTERM on the
+//                     main thread, print "ready", read SIGTERM from a signalfd, print "took SIGTERM", exit 0
 //   shm_peer echo_asleep <domain> <in> <out> <count> [no_membarrier]
 //                     read count numbers from in asleep (spin 0), each published back on out, then print
 //                     "done <heavy fences asked for> <ms>"; with no_membarrier under a seccomp filter that
 //                     refuses membarrier(2), as a container's may
 #include <linux/filter.h>
 #include <linux/seccomp.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
 #include <sys/prctl.h>
+#include <sys/signalfd.h>
 #include <sys/syscall.h>
 #include <unistd.h>
 
@@ -297,6 +303,25 @@ int main(int argc, char** argv) {
       if (tick->cycle >= 5 && !said.exchange(true)) say("looping");
     }, {.name = topic});
     forever();
+  }
+  if (role == "signalfd" && argc == 4) {
+    // As a daemon with an event loop does: its signals read from a
+    // signalfd, set up after the core has started its workers (which must
+    // take none of them: a signal no thread blocks goes to one that does not).
+    (void)core.serve(topic, [](const std::int64_t& x) { return x + 1; }, {.workers = 2});
+    sigset_t term;
+    sigemptyset(&term);
+    sigaddset(&term, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &term, nullptr);
+    const int fd = signalfd(-1, &term, SFD_CLOEXEC);
+    if (fd < 0) fail("signalfd");
+    say("ready");
+    pollfd p{fd, POLLIN, 0};
+    signalfd_siginfo info{};
+    if (poll(&p, 1, 30'000) != 1 || read(fd, &info, sizeof info) != sizeof info || info.ssi_signo != SIGTERM)
+      fail("no SIGTERM on the signalfd within 30 s");
+    say("took SIGTERM");
+    return 0;
   }
   if (role == "serve" && argc == 5) {
     const std::string kind = argv[4];

@@ -52,6 +52,19 @@ TEST(ShmServiceProcesses, FourProcessesOfFourThreadsEachGetTheirOwnAnswers) {
   EXPECT_EQ(listed(core, "echo")->served, 4 * all);
 }
 
+// A program that reads its signals from a signalfd, having blocked them on
+// its thread once its core's workers were running, gets them: the workers
+// take none. Before the workers blocked every signal, SIGTERM went to a
+// worker and killed the program by its default action.
+TEST(ShmServiceProcesses, AProgramsSignalsGoToItsOwnThreadsNotToTheWorkers) {
+  const auto domain = unique_domain("signalfd");
+  PeerProcess daemon{{"signalfd", domain, "plus"}};
+  ASSERT_TRUE(daemon.says("ready"));
+  ASSERT_EQ(::kill(daemon.pid(), SIGTERM), 0);
+  EXPECT_TRUE(daemon.says("took SIGTERM", 10s));
+  EXPECT_EQ(daemon.exit_code(10s), 0) << "128 + 15 is a death by SIGTERM, taken by a worker";
+}
+
 TEST(ShmServiceProcesses, AServiceKilledMidCallIsReportedDeadToItsCallerWithin100Ms) {
   const auto domain = unique_domain("dead-service");
   shm::Core core{domain};

@@ -38,11 +38,11 @@ std::atomic<bool> stop_requested{false};
 
 // Ctrl-C is taken by the command's own loop, synchronously: SIGINT is
 // blocked on this (the main) thread and picked up by ctrl_c_pressed(). The
-// handler stays for a thread of the process that does not block it (the
-// recorder's threads block every signal). Taken this way, no signal is
-// lost in a handler's delivery: under ThreadSanitizer, whose runtime defers
-// and replays handlers, a SIGINT sent right after a SIGCONT sometimes never
-// ran the handler at all.
+// handler stays for a thread of the process that does not block it (Prime's
+// own threads, workers and recorders, block every signal). Taken this way,
+// no signal is lost in a handler's delivery: under ThreadSanitizer, whose
+// runtime defers and replays handlers, a SIGINT sent right after a SIGCONT
+// sometimes never ran the handler at all.
 void finish_on_ctrl_c() {
   std::signal(SIGINT, [](int) { stop_requested = true; });
   sigset_t interrupt;

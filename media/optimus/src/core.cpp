@@ -12,6 +12,7 @@
 #include "prime/optimus/detail/registry.hpp"
 #include "prime/optimus/detail/service.hpp"
 #include "prime/optimus/detail/stream_writer.hpp"
+#include "prime/topology/detail/quiet_threads.hpp"
 
 namespace prime::optimus {
 
@@ -88,20 +89,22 @@ void Core::host(const std::string& name, const std::string& shown, detail::Handl
   std::scoped_lock lock{services_mutex_};
   if (stopping_) throw Failure{{Errc::stopped, "service '" + shown + "': the optimus core is shutting down"}};
   alive_keys_.push_back(detail::alive_key(key));
-  if (alive_keys_.size() == 1)
-    services_.emplace_back([this](std::stop_token stop) {
-      detail::keep_alive(pool_, [this] {
-        std::scoped_lock lock{services_mutex_};
-        return alive_keys_;
-      }, stop);
-    });
-  auto shared = std::make_shared<const detail::Handler>(std::move(handler));
-  for (std::size_t i = 0; i < std::max<std::size_t>(serve_options.workers, 1); ++i) {
-    services_.emplace_back([pool = pool_, shown, key, shared, weak = runtime()](std::stop_token stop) {
-      prime::detail::RuntimeState::become_worker(stop);
-      detail::serve_requests(pool, shown, key, *shared, weak, std::move(stop));
-    });
-  }
+  prime::detail::with_signals_blocked([&] {  // the program's signals are not these threads'
+    if (alive_keys_.size() == 1)
+      services_.emplace_back([this](std::stop_token stop) {
+        detail::keep_alive(pool_, [this] {
+          std::scoped_lock lock{services_mutex_};
+          return alive_keys_;
+        }, stop);
+      });
+    auto shared = std::make_shared<const detail::Handler>(std::move(handler));
+    for (std::size_t i = 0; i < std::max<std::size_t>(serve_options.workers, 1); ++i) {
+      services_.emplace_back([pool = pool_, shown, key, shared, weak = runtime()](std::stop_token stop) {
+        prime::detail::RuntimeState::become_worker(stop);
+        detail::serve_requests(pool, shown, key, *shared, weak, std::move(stop));
+      });
+    }
+  });
 }
 
 }  // namespace prime::optimus

@@ -11,6 +11,7 @@
 
 #include "prime/logic/error.hpp"
 #include "prime/logic/event.hpp"
+#include "prime/topology/detail/quiet_threads.hpp"
 
 namespace prime::detail {
 
@@ -31,9 +32,11 @@ class RuntimeState {
   void spawn(std::move_only_function<void(std::stop_token)> work) {
     std::scoped_lock lock{mutex_};
     if (stopping_) throw Failure{{Errc::stopped, medium_ + " core is shutting down: no new worker"}};
-    workers_.emplace_back([work = std::move(work)](std::stop_token stop) mutable {
-      become_worker(stop);
-      work(std::move(stop));
+    with_signals_blocked([&] {
+      workers_.emplace_back([work = std::move(work)](std::stop_token stop) mutable {
+        become_worker(stop);
+        work(std::move(stop));
+      });
     });
   }
 
