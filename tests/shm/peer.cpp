@@ -307,7 +307,8 @@ int main(int argc, char** argv) {
   if (role == "signalfd" && argc == 4) {
     // As a daemon with an event loop does: its signals read from a
     // signalfd, set up after the core has started its workers (which must
-    // take none of them: a signal no thread blocks goes to one that does not).
+    // take none of them: a signal this thread blocks goes to one that does
+    // not).
     (void)core.serve(topic, [](const std::int64_t& x) { return x + 1; }, {.workers = 2});
     sigset_t term;
     sigemptyset(&term);
