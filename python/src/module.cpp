@@ -232,25 +232,22 @@ struct Subscriber {
   }
 };
 
-// A sync of two to eight subscribers' sources (prime::kMaxSyncInputs), as C++'s prime::sync makes it
-// (its workers in the core's runtime): a reader of its sets, each the
-// samples of one set in the order of the sources.
+// A sync of 2 to prime::kMaxSyncInputs subscribers' sources, as C++'s
+// prime::sync makes it (its workers in the core's runtime): a reader of its
+// sets, each the samples of one set in the order of the sources.
 class SyncReader {
  public:
   using Set = std::vector<prime::Sample<shm::View<shm::Bytes>>>;
 
+  // C++'s sync of each number of inputs it takes is compiled in; the one
+  // of sources.size() starts.
   SyncReader(const prime::SyncPolicy& policy, std::vector<shm::Subscription<shm::Bytes>> sources) {
-    switch (sources.size()) {
-      case 2: start(policy, sources, std::make_index_sequence<2>{}); break;
-      case 3: start(policy, sources, std::make_index_sequence<3>{}); break;
-      case 4: start(policy, sources, std::make_index_sequence<4>{}); break;
-      case 5: start(policy, sources, std::make_index_sequence<5>{}); break;
-      case 6: start(policy, sources, std::make_index_sequence<6>{}); break;
-      case 7: start(policy, sources, std::make_index_sequence<7>{}); break;
-      case 8: start(policy, sources, std::make_index_sequence<8>{}); break;
-      default:  // checked before the subscribers are given
-        throw prime::Failure{{prime::Errc::invalid_argument, "a sync of " + std::to_string(sources.size()) + " inputs"}};
-    }
+    const bool started = [&]<std::size_t... Extra>(std::index_sequence<Extra...>) {
+      return ((sources.size() == Extra + 2 && (start(policy, sources, std::make_index_sequence<Extra + 2>{}), true)) ||
+              ...);
+    }(std::make_index_sequence<prime::kMaxSyncInputs - 1>{});
+    if (!started)  // checked before the subscribers are given
+      throw prime::Failure{{prime::Errc::invalid_argument, "a sync of " + std::to_string(sources.size()) + " inputs"}};
   }
 
   std::vector<std::shared_ptr<Held>> read(std::optional<double> timeout) {
