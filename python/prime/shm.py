@@ -290,7 +290,8 @@ class Domain:
         """Calls `service` with `request` (a numpy array or dict of its request
         type, or bytes for raw) and returns its reply (a numpy array of its
         reply type, or bytes), waiting up to `timeout` seconds (None: the
-        service's own): prime.Timeout, prime.NotFound, prime.PeerDead,
+        service's own; on the main thread Ctrl-C gives the call up, as
+        KeyboardInterrupt): prime.Timeout, prime.NotFound, prime.PeerDead,
         prime.BlockFailed... as in C++."""
         key = (service, timeout)
         if key not in self._clients:

@@ -391,11 +391,28 @@ struct LoanedMessage {
   }
 };
 
+// Python's main thread, the one its signal handlers (Ctrl-C) run on.
+unsigned long main_thread = 0;
+
+// Asked by a call on the main thread each time it has waited a slice with
+// no answer: whether a signal's handler raised (KeyboardInterrupt), whose
+// exception is then this thread's to throw once it has the GIL back.
+bool signal_raised() {
+  const auto gil = PyGILState_Ensure();
+  const bool raised = PyErr_CheckSignals() != 0;
+  PyGILState_Release(gil);
+  return raised;
+}
+
 struct Client {
   shm::ServiceChain<shm::Bytes, shm::Bytes> chain;
 
+  // On the main thread the call gives up at a signal's exception (Ctrl-C),
+  // as a read does; elsewhere it waits out its timeout (Python runs signal
+  // handlers only on the main thread).
   py::bytes call(const py::buffer& request) const {
     check_own(this);
+    const std::function<bool()> give_up = PyThread_get_thread_ident() == main_thread ? signal_raised : nullptr;
     const auto info = request.request();
     if (!PyBuffer_IsContiguous(info.view(), 'C'))
       throw prime::Failure{{prime::Errc::invalid_argument, "a request must be one contiguous block of bytes"}};
@@ -407,8 +424,12 @@ struct Client {
             std::memcpy(to.data(), info.ptr, std::min(size, to.size()));
             return size;  // over the room: the call fails with too_large
           },
-          [&](std::span<const std::byte> from) { reply.assign(reinterpret_cast<const char*>(from.data()), from.size()); });
+          [&](std::span<const std::byte> from) {
+            reply.assign(reinterpret_cast<const char*>(from.data()), from.size());
+          },
+          give_up);
     });
+    if (PyErr_Occurred() != nullptr) throw py::error_already_set();  // given up (or answered just after)
     if (!done) throw prime::Failure{done.error()};
     return py::bytes{reply};
   }
@@ -529,6 +550,7 @@ py::dict topic_info(const shm::RegistrySnapshot::Topic& t) {
 PYBIND11_MODULE(_prime, m) {
   m.doc() = "Prime's Shm medium (see the prime package)";
   pthread_atfork(nullptr, nullptr, on_fork_in_child);
+  main_thread = py::module_::import("threading").attr("main_thread")().attr("ident").cast<unsigned long>();
 
   // A prime::Failure becomes the prime package's exception for its code.
   py::register_exception_translator([](std::exception_ptr p) {

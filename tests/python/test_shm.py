@@ -259,6 +259,48 @@ def test_ctrl_c_ends_a_blocking_read(domain):
     peer.close()
 
 
+def line_within(stream, seconds):
+    """The next line of `stream`, which must come within `seconds`."""
+    ready, _, _ = select.select([stream], [], [], seconds)
+    assert ready, f"no line in {seconds} s"
+    return stream.readline().strip()
+
+
+def test_ctrl_c_gives_up_a_service_call_and_the_next_call_gets_its_own_answer(domain):
+    entered, release = threading.Event(), threading.Event()
+
+    def held(data):
+        entered.set()
+        release.wait(30)
+        return data
+
+    with prime.shm.Domain(domain) as d:
+        d.serve("held", held, bytes, bytes, workers=2, max_request_size=16, max_reply_size=16)
+        script = textwrap.dedent(f"""
+            import prime
+            d = prime.shm.Domain({domain!r})
+            try:
+                print("calling", flush=True)
+                d.call("held", b"first", timeout=60)
+            except KeyboardInterrupt:
+                print("interrupted", flush=True)
+            print(bytes(d.call("held", b"second", timeout=60)).decode(), flush=True)
+        """)
+        caller = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+        try:
+            assert line_within(caller.stdout, 10) == "calling"
+            assert entered.wait(10)  # the request is in a worker: the caller waits for its answer
+            wait_until_asleep(f"/proc/{caller.pid}")
+            caller.send_signal(signal.SIGINT)
+            assert line_within(caller.stdout, 10) == "interrupted"  # not the call's 60 s, nor the worker's 30
+            release.set()  # the first answer, given up, is dropped
+            assert line_within(caller.stdout, 10) == "second"
+            assert caller.wait(10) == 0
+        finally:
+            release.set()
+            caller.kill()
+
+
 def test_a_daemon_thread_asleep_in_read_lets_the_interpreter_exit(domain):
     # At exit Python ends such a thread as it takes the GIL back: through a
     # C++ destructor that was std::terminate (exit 134).

@@ -9,9 +9,11 @@
 #include <cstdint>
 #include <expected>
 #include <fstream>
+#include <future>
 #include <latch>
 #include <new>
 #include <optional>
+#include <stop_token>
 #include <string>
 #include <thread>
 #include <vector>
@@ -235,6 +237,56 @@ TEST_F(ServiceTest, AnAnswerAfterItsCallTimedOutNeverReachesALaterCall) {
     auto got = slow.call(i);
     ASSERT_TRUE(got) << got.error().describe();
     ASSERT_EQ(*got, i * 10) << "each call gets its own answer";
+  }
+}
+
+// A caller that must stop waiting (a shutdown, Ctrl-C in Python) gives its
+// call up well before the call's timeout; the answer it left is dropped.
+TEST_F(ServiceTest, ACallGivenUpEndsStoppedBeforeItsTimeoutAndItsAnswerReachesNoLaterCall) {
+  std::latch release{1};
+  std::atomic<bool> entered{false};
+  shm::Core core{unique_domain("given-up")};  // stopped before what its block uses goes
+  struct Release {
+    std::latch& latch;
+    bool done = false;
+    void now() {
+      if (!std::exchange(done, true)) latch.count_down();
+    }
+    ~Release() { now(); }
+  } release_guard{release};
+  core.serve("held", [&](const int& x) {
+    if (x == 1) {
+      entered = true;
+      entered.notify_all();
+      release.wait();
+    }
+    return x * 10;
+  }, {.workers = 2});
+  auto held = core.chain<int, int>("held", {.timeout = 60s});
+  std::stop_source stop;
+  std::atomic<int> asked{0};
+  std::promise<std::expected<int, Error>> given_up;
+  std::jthread caller{[&] {
+    given_up.set_value(held.call(1, [&] {
+      ++asked;
+      return stop.stop_requested();
+    }));
+  }};
+  entered.wait(false);  // the request is in a worker: the caller waits for its answer
+  stop.request_stop();
+  auto result = given_up.get_future();
+  ASSERT_EQ(result.wait_for(10s), std::future_status::ready) << "a given-up call waited on";
+  auto got = result.get();
+  ASSERT_FALSE(got);
+  EXPECT_EQ(got.error().code, Errc::stopped);
+  EXPECT_NE(got.error().message.find("service 'held': the caller gave this call up"), std::string::npos)
+      << got.error().message;
+  EXPECT_GE(asked.load(), 1);
+  release_guard.now();  // the worker answers call 1 now, for no one
+  for (int i = 2; i < 50; ++i) {
+    auto next = held.call(i, [] { return false; });
+    ASSERT_TRUE(next) << next.error().describe();
+    ASSERT_EQ(*next, i * 10) << "each call gets its own answer";
   }
 }
 

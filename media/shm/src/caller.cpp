@@ -139,7 +139,8 @@ void Binding::unbind() {
   release_slot(true);
 }
 
-std::expected<void, Error> call(const Route& route, const RequestWriter& write, const ReplyReader& read, bool posted) {
+std::expected<void, Error> call(const Route& route, const RequestWriter& write, const ReplyReader& read, bool posted,
+                                const GiveUp& give_up) {
   struct Held {
     std::shared_ptr<Service> service;
     std::size_t cell = 0;
@@ -235,7 +236,11 @@ std::expected<void, Error> call(const Route& route, const RequestWriter& write, 
   auto over = [&] { return answered() || gone.has_value(); };
   auto sleep = [&](Clock::time_point until) {
     last.service->tail(last.cell).answered.sleep_until(1, answered, std::min(until, Clock::now() + std::chrono::milliseconds{25}));
-    if (!answered()) check();
+    if (answered()) return;
+    check();
+    if (!gone && give_up && give_up())
+      gone = Error{Errc::stopped,
+                   "service '" + route.front()->name() + "': the caller gave this call up while it waited"};
   };
   (void)prime::detail::spin_then_sleep(prime::detail::yielding(over), sleep, route.back()->qos().spin, deadline, std::stop_token{}, now);
   if (!answered()) {

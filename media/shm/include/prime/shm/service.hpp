@@ -3,6 +3,7 @@
 #include <cstddef>
 #include <cstring>
 #include <expected>
+#include <functional>
 #include <memory>
 #include <new>
 #include <span>
@@ -78,8 +79,15 @@ using wire_t = std::conditional_t<std::is_same_v<std::remove_cvref_t<T>, std::sp
 // type_mismatch (other types), too_large (a request or reply over its
 // size), queue_full (queue_depth or calls_per_client), rate_limited
 // (min_interval), too_many_clients (max_clients), timeout, peer_dead (the
-// server died while the call waited), stopped (it stopped), block_failed
-// (the block threw: its message).
+// server died while the call waited), stopped (it stopped, or the
+// caller's give_up said so), block_failed (the block threw: its message).
+//
+// call() and call_in_place() take a way out for a caller that may have to
+// stop waiting before the timeout (a shutdown, Ctrl-C): `give_up()` is
+// asked on the calling thread each time the call has slept a slice (at
+// most 25 ms) with no answer, e.g. `[&] { return token.stop_requested(); }`.
+// Given up, the call ends with Errc::stopped; a worker that took the
+// request finishes it, and its answer is dropped.
 template <Message In, Message Out>
 class ServiceChain {
  public:
@@ -97,11 +105,13 @@ class ServiceChain {
   }
 
   // The answer, or the error that kept it.
-  [[nodiscard]] std::expected<output_type, Error> call(const input_type& in) const {
+  [[nodiscard]] std::expected<output_type, Error> call(const input_type& in,
+                                                      const std::function<bool()>& give_up = {}) const {
     std::optional<output_type> out;
     auto done = detail::call(
         *route_, [&](std::byte* to, std::size_t capacity) { return detail::Wire<In>::write(in, to, capacity); },
-        [&](const std::byte* from, std::size_t size) { out.emplace(detail::Wire<Out>::read(from, size)); }, false);
+        [&](const std::byte* from, std::size_t size) { out.emplace(detail::Wire<Out>::read(from, size)); }, false,
+        give_up);
     if (!done) return std::unexpected(std::move(done.error()));
     return std::move(*out);
   }
@@ -113,7 +123,8 @@ class ServiceChain {
   // write(std::span<std::byte>) returns the request's size and
   // read(std::span<const std::byte>) gets the answer.
   template <class Write, class Read>
-  [[nodiscard]] std::expected<void, Error> call_in_place(Write&& write, Read&& read) const {
+  [[nodiscard]] std::expected<void, Error> call_in_place(Write&& write, Read&& read,
+                                                         const std::function<bool()>& give_up = {}) const {
     return detail::call(
         *route_,
         [&](std::byte* to, std::size_t capacity) -> std::size_t {
@@ -128,7 +139,7 @@ class ServiceChain {
             return sizeof(In);
           }
         },
-        [&](const std::byte* from, std::size_t size) { read(detail::Wire<Out>::view(from, size)); }, false);
+        [&](const std::byte* from, std::size_t size) { read(detail::Wire<Out>::view(from, size)); }, false, give_up);
   }
 
   // Sends `in` and returns once it is queued, not waiting for the answer

@@ -26,10 +26,15 @@ using RequestWriter = std::function<std::size_t(std::byte* to, std::size_t capac
 // Reads an answer where it lies: its bytes and their count.
 using ReplyReader = std::function<void(const std::byte* from, std::size_t size)>;
 
+// Asked on the calling thread each time a call has slept a slice (at most
+// 25 ms) with no answer: true gives the call up (Errc::stopped).
+using GiveUp = std::function<bool()>;
+
 // One call through `route`: the caller sends once and waits once, for the
 // last service. `read` takes the answer in place. `posted`: no answer is
-// waited for.
-std::expected<void, Error> call(const Route& route, const RequestWriter& write, const ReplyReader& read, bool posted);
+// waited for. `give_up`, if any: see GiveUp.
+std::expected<void, Error> call(const Route& route, const RequestWriter& write, const ReplyReader& read, bool posted,
+                                const GiveUp& give_up = {});
 
 // `first` then `second`, as one route. Throws Failure: Errc::type_mismatch
 // when the last service of `first` gives what the first of `second` does
