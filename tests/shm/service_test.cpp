@@ -207,18 +207,23 @@ TEST_F(ServiceTest, CallingWithOtherTypesNamesTheServiceAndBothTypes) {
   EXPECT_TRUE(fails_with([&] { core.serve("planner", plan); }, Errc::in_use, "service 'planner' is served already"));
 }
 
+// Counts a latch down once: now(), or at the latest when it goes. Declared
+// after the core whose block waits on the latch, it lets that block finish
+// before the core's stop waits for it, even when a test ends early.
+struct ReleaseOnce {
+  std::latch& latch;
+  bool done = false;
+  void now() {
+    if (!std::exchange(done, true)) latch.count_down();
+  }
+  ~ReleaseOnce() { now(); }
+};
+
 TEST_F(ServiceTest, AnAnswerAfterItsCallTimedOutNeverReachesALaterCall) {
   std::latch release{1};
   std::atomic<bool> entered{false};
   shm::Core core{unique_domain("slow")};  // stopped before what its block uses goes
-  struct Release {
-    std::latch& latch;
-    bool done = false;
-    void now() {
-      if (!std::exchange(done, true)) latch.count_down();
-    }
-    ~Release() { now(); }
-  } release_guard{release};
+  ReleaseOnce release_guard{release};
   core.serve("slow", [&](const int& x) {
     if (x == 1) {
       entered = true;
@@ -246,14 +251,7 @@ TEST_F(ServiceTest, ACallGivenUpEndsStoppedBeforeItsTimeoutAndItsAnswerReachesNo
   std::latch release{1};
   std::atomic<bool> entered{false};
   shm::Core core{unique_domain("given-up")};  // stopped before what its block uses goes
-  struct Release {
-    std::latch& latch;
-    bool done = false;
-    void now() {
-      if (!std::exchange(done, true)) latch.count_down();
-    }
-    ~Release() { now(); }
-  } release_guard{release};
+  ReleaseOnce release_guard{release};
   core.serve("held", [&](const int& x) {
     if (x == 1) {
       entered = true;
