@@ -98,9 +98,14 @@ std::unordered_set<const void*>& inherited_handles() {
   static std::unordered_set<const void*> handles;
   return handles;
 }
+// Python's main thread, the one its signal handlers (Ctrl-C) run on: in a
+// child of fork(), the thread that forked, as Python makes it.
+unsigned long main_thread = 0;
+
 void on_fork_in_child() {
   inherited_handles().merge(live_handles());
   live_handles().clear();
+  main_thread = PyThread_get_thread_ident();
 }
 
 // Throws unless `handle` was made by this process.
@@ -390,9 +395,6 @@ struct LoanedMessage {
     });
   }
 };
-
-// Python's main thread, the one its signal handlers (Ctrl-C) run on.
-unsigned long main_thread = 0;
 
 // Asked by a call on the main thread each time it has waited a slice with
 // no answer: whether a signal's handler raised (KeyboardInterrupt), whose
