@@ -10,10 +10,11 @@ namespace prime::detail {
 // Runs `start`, which starts a thread of Prime's own, with every signal
 // blocked on the calling thread, and returns what it returns. The thread
 // it starts inherits the mask, so it takes none of the program's signals:
-// those go to the program's own threads, to its handler or its sigwait. A
-// program that blocks SIGTERM and waits for it with sigwait, after a core
-// started its workers, would otherwise die of the signal delivered to a
-// worker.
+// those go to the program's own threads, to its handler, sigwait or
+// signalfd. A program that blocks SIGTERM and reads it from a signalfd,
+// after a core started its workers, would otherwise die of the signal
+// delivered to a worker (sigwait hides this: it unblocks the signal while
+// it waits).
 template <class Start>
 decltype(auto) with_signals_blocked(Start&& start) {
   sigset_t all, before;
